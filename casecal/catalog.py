@@ -1,0 +1,235 @@
+"""The robot catalog and robot files: `robots`, `load_robot`, `robot_to_toml`.
+
+A robot file is TOML::
+
+    name = "my_arm"
+    convention = "dh"          # "dh" = standard (Rz θ, Tz d, Tx a, Rx α); "mdh" = modified/Craig
+    length_unit = "mm"         # "m" (default) or "mm"
+    angle_unit = "deg"         # "rad" (default) or "deg"
+    [[joints]]                 # one table per joint, base to tip
+    type = "R"                 # "R" or "P"
+    a = 0.0
+    alpha = -90.0
+    d = 349.0
+    theta = 0.0                # constant offset added to the joint variable (default 0)
+    beta = 0.0                 # optional: Hayati's tilt (default: 0 where the axes are parallel)
+    limits = [-170.0, 170.0]   # optional, in the file's units (a prismatic joint's in length_unit)
+    [base]                     # optional, default identity: xyz in length_unit, rpy in angle_unit
+    xyz = [0.0, 0.0, 0.0]
+    rpy = [0.0, 0.0, 0.0]      # (rx, ry, rz): R = Rz(rz) Ry(ry) Rx(rx)
+    [tool]                     # optional, same form
+    xyz = [0.0, 0.0, 0.1]
+
+``full_name``, ``variant``, ``source`` (list of strings) and ``confidence`` are optional
+descriptions. Every mistake raises `CalibrationError` naming the file, the key and the fix.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+from .errors import CalibrationError
+from .robot import Frame, Joint, Robot
+
+_LENGTH = {"m": 1.0, "mm": 1e-3}
+_ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
+_TOP_KEYS = {"name", "convention", "length_unit", "angle_unit", "joints", "base", "tool",
+             "full_name", "variant", "source", "confidence", "description"}  # fmt: skip
+_JOINT_KEYS = {"type", "a", "alpha", "d", "theta", "beta", "limits"}
+_FRAME_KEYS = {"xyz", "rpy"}
+
+
+def _catalog_dir():
+    return resources.files("casecal") / "robots"
+
+
+def robots() -> list[str]:
+    """Names of the robots in the catalog, sorted.
+
+    Returns
+    -------
+    list of str
+        Each loads with ``casecal.load_robot(name)``.
+    """
+    return sorted(p.name[:-5] for p in _catalog_dir().iterdir() if p.name.endswith(".toml"))
+
+
+def load_robot(name_or_path: str | Path) -> Robot:
+    """Load a robot from the catalog by name, or from a TOML file by path.
+
+    Parameters
+    ----------
+    name_or_path : str or path
+        A catalog name (see `robots`) or the path of a robot file (schema in the module doc).
+
+    Returns
+    -------
+    Robot
+        Numbers converted to SI (m, rad).
+
+    Raises
+    ------
+    CalibrationError
+        Unknown name, missing file, or a malformed file (the message names file and key).
+    """
+    text = str(name_or_path)
+    path = Path(text)
+    if path.suffix == ".toml" or path.exists() or "/" in text or "\\" in text:
+        if not path.is_file():
+            raise CalibrationError(f"robot file {text!r} does not exist; check the path")
+        label, data_bytes = str(path), path.read_bytes()
+    else:
+        entry = _catalog_dir() / f"{text}.toml"
+        if not entry.is_file():
+            raise CalibrationError(
+                f"unknown robot {text!r}; catalog robots are: {', '.join(robots())} "
+                "(or give the path of a .toml robot file)"
+            )
+        label, data_bytes = f"catalog robot {text}", entry.read_bytes()
+    try:
+        data = tomllib.loads(data_bytes.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise CalibrationError(f"{label}: not valid TOML ({exc}); fix the syntax") from None
+    return robot_from_dict(data, label=label, default_name=path.stem)
+
+
+def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot") -> Robot:
+    """Build a Robot from parsed TOML (see the module doc); `label` names it in errors."""
+    _no_unknown(data, _TOP_KEYS, label, "top level")
+    length = _unit(data, "length_unit", _LENGTH, label)
+    angle = _unit(data, "angle_unit", _ANGLE, label)
+    if "convention" not in data:
+        raise CalibrationError(
+            f"{label}: missing key 'convention'; add convention = \"dh\" (standard) or "
+            '"mdh" (modified/Craig) - the same numbers mean different robots'
+        )
+    convention = data["convention"]
+    if convention not in ("dh", "mdh"):
+        raise CalibrationError(
+            f'{label}: convention = {convention!r} is unknown; use "dh" or "mdh"'
+        )
+    rows = data.get("joints")
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
+        raise CalibrationError(
+            f"{label}: missing or empty [[joints]]; add one [[joints]] table per joint"
+        )
+    joints = []
+    for i, row in enumerate(rows, start=1):
+        where = f"joints[{i}]"
+        _no_unknown(row, _JOINT_KEYS, label, where)
+        jtype = row.get("type")
+        if jtype not in ("R", "P"):
+            raise CalibrationError(
+                f'{label}: {where}.type = {jtype!r}; it must be "R" (revolute) or "P" (prismatic)'
+            )
+        for key in ("a", "alpha", "d"):
+            if key not in row:
+                raise CalibrationError(f"{label}: {where} misses key '{key}'; add {key} = <number>")
+        limits = None
+        if "limits" in row:
+            lim = row["limits"]
+            if not isinstance(lim, list) or len(lim) != 2:
+                raise CalibrationError(f"{label}: {where}.limits must be [min, max]")
+            scale = length if jtype == "P" else angle
+            lo, hi = (_number(v, label, f"{where}.limits") * scale for v in lim)
+            if not lo < hi:
+                raise CalibrationError(f"{label}: {where}.limits = {lim}: min must be below max")
+            limits = (lo, hi)
+        beta = row.get("beta")
+        joints.append(Joint(
+            type=jtype,
+            a=_number(row["a"], label, f"{where}.a") * length,
+            alpha=_number(row["alpha"], label, f"{where}.alpha") * angle,
+            d=_number(row["d"], label, f"{where}.d") * length,
+            theta=_number(row.get("theta", 0.0), label, f"{where}.theta") * angle,
+            beta=None if beta is None else _number(beta, label, f"{where}.beta") * angle,
+            limits=limits,
+        ))  # fmt: skip
+    name = data.get("name", default_name)
+    if not isinstance(name, str) or not name:
+        raise CalibrationError(f"{label}: name must be a non-empty string")
+    source = data.get("source", ())
+    source = (source,) if isinstance(source, str) else tuple(str(s) for s in source)
+    return Robot(
+        name=name,
+        joints=tuple(joints),
+        convention=convention,
+        base=_frame(data, "base", length, angle, label),
+        tool=_frame(data, "tool", length, angle, label),
+        full_name=str(data.get("full_name", "")),
+        source=source,
+        confidence=str(data.get("confidence", "")),
+    )
+
+
+def robot_to_toml(robot: Robot) -> str:
+    """Write `robot` as a robot file (m, rad, full precision) that `load_robot` reads back."""
+    lines = [f"name = {_q(robot.name)}"]
+    if robot.full_name:
+        lines.append(f"full_name = {_q(robot.full_name)}")
+    lines += [f"convention = {_q(robot.convention)}", 'length_unit = "m"', 'angle_unit = "rad"']
+    if robot.source:
+        lines.append("source = [" + ", ".join(_q(s) for s in robot.source) + "]")
+    if robot.confidence:
+        lines.append(f"confidence = {_q(robot.confidence)}")
+    for j in robot.joints:
+        lines += ["", "[[joints]]", f"type = {_q(j.type)}", f"a = {j.a!r}",
+                  f"alpha = {j.alpha!r}", f"d = {j.d!r}", f"theta = {j.theta!r}"]  # fmt: skip
+        if j.beta is not None:
+            lines.append(f"beta = {j.beta!r}")
+        if j.limits is not None:
+            lines.append(f"limits = [{j.limits[0]!r}, {j.limits[1]!r}]")
+    for key, frame in (("base", robot.base), ("tool", robot.tool)):
+        lines += ["", f"[{key}]", f"xyz = [{', '.join(repr(float(v)) for v in frame.xyz)}]",
+                  f"rpy = [{', '.join(repr(float(v)) for v in frame.rpy)}]"]  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def _q(text: str) -> str:
+    escaped = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    return f'"{escaped}"'
+
+
+def _no_unknown(table: dict, allowed: set, label: str, where: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise CalibrationError(
+            f"{label}: unknown key '{unknown[0]}' at {where}; "
+            f"allowed keys: {', '.join(sorted(allowed))}"
+        )
+
+
+def _unit(data: dict, key: str, table: dict, label: str) -> float:
+    value = data.get(key, next(iter(table)))
+    if value not in table:
+        raise CalibrationError(
+            f"{label}: {key} = {value!r} is unknown; use one of {', '.join(map(repr, table))}"
+        )
+    return table[value]
+
+
+def _number(value, label: str, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise CalibrationError(f"{label}: {where} = {value!r} is not a number; write a number")
+    if not math.isfinite(value):
+        raise CalibrationError(f"{label}: {where} = {value} is not finite; write a finite number")
+    return float(value)
+
+
+def _frame(data: dict, key: str, length: float, angle: float, label: str) -> Frame:
+    table = data.get(key)
+    if table is None:
+        return Frame()
+    if not isinstance(table, dict):
+        raise CalibrationError(f"{label}: [{key}] must be a table with xyz and rpy")
+    _no_unknown(table, _FRAME_KEYS, label, f"[{key}]")
+    out = {}
+    for sub, scale in (("xyz", length), ("rpy", angle)):
+        v = table.get(sub, [0.0, 0.0, 0.0])
+        if not isinstance(v, list) or len(v) != 3:
+            raise CalibrationError(f"{label}: [{key}].{sub} must be a list of three numbers")
+        out[sub] = tuple(_number(x, label, f"[{key}].{sub}") * scale for x in v)
+    return Frame(out["xyz"], out["rpy"])

@@ -1,0 +1,9 @@
+"""The one exception type a user of casecal has to know about."""
+
+
+class CalibrationError(ValueError):
+    """A problem the user can fix: a bad file, an unknown robot or parameter, a wrong shape.
+
+    The message always says what was wrong and how to fix it. The command line turns it into
+    one line on stderr and exit code 2.
+    """

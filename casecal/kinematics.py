@@ -1,0 +1,310 @@
+"""Symbolic kinematics: the CasADi graph of a serial chain and its exact parameter Jacobians.
+
+One graph of the end-effector pose ``T(q, p)`` is built per robot *structure* (convention,
+joint types, which links carry a Hayati ``beta``), never per numeric value: the numbers of a
+robot, nominal or calibrated, are an input ``p`` of the graph. Everything else (position,
+Jacobians of position and of a pose error with respect to any subset of ``p``) is derived
+from that one graph by CasADi's algorithmic differentiation, so it is exact to rounding.
+
+Link transforms
+---------------
+Standard DH (``"dh"``), link ``i``, with Hayati's ``beta_i`` where present::
+
+    A_i = Rz(theta_i + q_i) Tz(d_i) Tx(a_i) Rx(alpha_i) Ry(beta_i)      (revolute)
+    A_i = Rz(theta_i) Tz(d_i + q_i) Tx(a_i) Rx(alpha_i) Ry(beta_i)      (prismatic)
+
+Modified DH (``"mdh"``, Craig), where ``a_i, alpha_i`` of row ``i`` are Craig's
+``a_{i-1}, alpha_{i-1}``::
+
+    A_i = Rx(alpha_i) Ry(beta_i) Tx(a_i) Rz(theta_i + q_i) Tz(d_i)     (prismatic: d_i + q_i)
+
+The whole chain is ``T = B · A_1 ⋯ A_n · E`` with base ``B`` and tool ``E`` each
+``Trans(x, y, z) · Rz(rz) Ry(ry) Rx(rx)``.
+
+Hayati's beta
+-------------
+When two consecutive joint axes are (nearly) parallel, the common normal between them can
+slide along the axes, and the link offset ``d`` that locates it becomes ill-defined: a tiny
+misalignment of the axes moves it by metres. Hayati and Mirmirani (1985) add a rotation
+``beta`` about the link's y axis, which describes that misalignment smoothly. casecal gives
+``beta_i`` (nominal value 0) to link ``i`` when, in standard DH, ``|sin alpha_i| < 0.01``
+and ``i < n`` (axes of joints ``i`` and ``i+1`` parallel or antiparallel), and, in modified
+DH, when ``|sin alpha_i| < 0.01`` and ``i > 1`` (axes of joints ``i-1`` and ``i``). The name
+follows the link that carries it, as in Hayati's paper: on the PUMA 560 (standard DH, axes 2
+and 3 parallel) it is ``beta2``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cache
+
+import casadi as ca
+import numpy as np
+
+from . import _native
+from .parameters import parameter_names
+
+log = logging.getLogger(__name__)
+
+PARALLEL_TOLERANCE = 0.01
+"""Consecutive axes with ``|sin(alpha)|`` below this count as parallel (about 0.57°)."""
+
+COMPILE_MIN_POSES = 200
+"""Batches of at least this many poses use compiled C (when a C compiler is present)."""
+
+KINDS = ("fk", "position", "position_jacobian", "pose_jacobian")
+
+
+@dataclass(frozen=True)
+class Structure:
+    """What a chain's graph depends on: everything but the numbers.
+
+    Attributes
+    ----------
+    convention : {"dh", "mdh"}
+    joint_types : str
+        One letter per joint, base to tip, ``"R"`` or ``"P"`` (e.g. ``"RRPR"``).
+    beta_joints : tuple of int
+        1-based indices of the links that carry a Hayati ``beta``.
+    """
+
+    convention: str
+    joint_types: str
+    beta_joints: tuple[int, ...] = ()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of the full parameter vector (see `casecal.parameters`)."""
+        return parameter_names(len(self.joint_types), self.beta_joints)
+
+
+def needs_beta(convention: str, index: int, n_joints: int, alpha: float) -> bool:
+    """Whether link `index` (1-based) gets a Hayati ``beta`` by the rule in the module doc."""
+    if abs(np.sin(alpha)) >= PARALLEL_TOLERANCE:
+        return False
+    return index < n_joints if convention == "dh" else index > 1
+
+
+# --- elementary transforms, as CasADi SX ------------------------------------------------
+
+
+def _rot(axis: str, c, s) -> ca.SX:
+    """Rotation about `axis` given the cosine and sine of its angle."""
+    T = ca.SX.eye(4)
+    i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[axis]
+    T[i, i], T[i, j], T[j, i], T[j, j] = c, -s, s, c
+    return T
+
+
+def _trans(x, y, z) -> ca.SX:
+    T = ca.SX.eye(4)
+    T[0, 3], T[1, 3], T[2, 3] = x, y, z
+    return T
+
+
+def frame_transform(xyz, rpy_cs) -> ca.SX:
+    """``Trans(x, y, z) · Rz(rz) Ry(ry) Rx(rx)``; `rpy_cs` holds (cos, sin) of rx, ry, rz."""
+    (cx, sx), (cy, sy), (cz, sz) = rpy_cs
+    return _trans(*xyz) @ _rot("z", cz, sz) @ _rot("y", cy, sy) @ _rot("x", cx, sx)
+
+
+def link_transform(convention, joint_type, q, theta, d, a, alpha_cs, beta_cs=None) -> ca.SX:
+    """The 4 × 4 transform of one link (module doc); `alpha_cs`, `beta_cs` are (cos, sin)."""
+    if joint_type == "R":
+        theta = theta + q
+    else:
+        d = d + q
+    rz = _rot("z", ca.cos(theta), ca.sin(theta))
+    rx = _rot("x", *alpha_cs)
+    tilt = ca.SX.eye(4) if beta_cs is None else _rot("y", *beta_cs)
+    if convention == "dh":
+        return rz @ _trans(0, 0, d) @ _trans(a, 0, 0) @ rx @ tilt
+    return rx @ tilt @ _trans(a, 0, 0) @ rz @ _trans(0, 0, d)
+
+
+def is_constant_angle(name: str) -> bool:
+    """Angles that do not combine with a joint variable: alpha, beta, base and tool rotations."""
+    return name.startswith(("alpha", "beta", "base_r", "tool_r"))
+
+
+# --- the chain ------------------------------------------------------------------------
+
+
+class Chain:
+    """The CasADi graph of ``T(q, p)`` for one `Structure`, and evaluators derived from it.
+
+    Build it through `chain` (cached per structure), not directly. Evaluators are built on
+    first use per (kind, parameter subset) and cached.
+
+    The constant angles (twists, betas, frame rotations) enter the graph through their
+    cosine and sine, which are inputs computed once per call (`extended`) rather than once
+    per pose: that removes two thirds of the trigonometry from the per-pose code. Their
+    Jacobian columns follow exactly by the chain rule, ``∂/∂φ = -sin φ ∂/∂c + cos φ ∂/∂s``.
+    """
+
+    def __init__(self, structure: Structure):
+        self.structure = structure
+        self.names = structure.names
+        self.index = {n: k for k, n in enumerate(self.names)}
+        self.angle_index = [k for k, n in enumerate(self.names) if is_constant_angle(n)]
+        m = len(self.angle_index)
+        self.q = ca.SX.sym("q", len(structure.joint_types))
+        self.p = ca.SX.sym("p", len(self.names))
+        self.cos = ca.SX.sym("cos", m)
+        self.sin = ca.SX.sym("sin", m)
+        self.pext = ca.vertcat(self.p, self.cos, self.sin)
+        trig = {self.names[k]: (self.cos[t], self.sin[t]) for t, k in enumerate(self.angle_index)}
+        P = {name: self.p[k] for k, name in enumerate(self.names)}
+
+        def frame(prefix):
+            xyz = [P[f"{prefix}_{a}"] for a in "xyz"]
+            return frame_transform(xyz, [trig[f"{prefix}_r{a}"] for a in "xyz"])
+
+        T = frame("base")
+        for i, jt in enumerate(structure.joint_types, start=1):
+            T = T @ link_transform(
+                structure.convention, jt, self.q[i - 1], P[f"theta{i}"], P[f"d{i}"],
+                P[f"a{i}"], trig[f"alpha{i}"], trig.get(f"beta{i}"),
+            )  # fmt: skip
+        self.T = T @ frame("tool")
+        self._evaluators: dict = {}
+
+    def extended(self, p: np.ndarray) -> np.ndarray:
+        """The graph's input: `p` followed by cos and sin of its constant angles."""
+        angles = p[self.angle_index]
+        return np.concatenate([p, np.cos(angles), np.sin(angles)])
+
+    def _jacobian(self, expr: ca.SX, columns: tuple[int, ...]) -> ca.SX:
+        """Exact ∂expr/∂p[columns], constant angles through their cos and sin.
+
+        One `ca.jacobian` call over all the symbols involved, so CasADi can pick reverse
+        mode (few outputs, many parameters); the angle columns are combined afterwards.
+        """
+        if not columns:
+            return ca.SX(expr.numel(), 0)
+        slot = {k: t for t, k in enumerate(self.angle_index)}
+        symbols, where = [], []
+        for k in columns:
+            if k in slot:
+                where.append((len(symbols), len(symbols) + 1, slot[k]))
+                symbols += [self.cos[slot[k]], self.sin[slot[k]]]
+            else:
+                where.append((len(symbols), None, None))
+                symbols.append(self.p[k])
+        J = ca.jacobian(expr, ca.vertcat(*symbols))
+        cols = []
+        for first, second, t in where:
+            if second is None:
+                cols.append(J[:, first])
+            else:
+                cols.append(-self.sin[t] * J[:, first] + self.cos[t] * J[:, second])
+        return ca.horzcat(*cols)
+
+    def columns(self, parameters: Sequence[str] | None) -> tuple[int, ...]:
+        """Indices into the full vector of the named parameters (all when None)."""
+        if parameters is None:
+            return tuple(range(len(self.names)))
+        return tuple(self.index[name] for name in parameters)
+
+    def expression(self, kind: str, columns: tuple[int, ...] = ()) -> ca.SX:
+        """The per-pose output of `kind`, laid out so that C order of the result is natural.
+
+        CasADi stores matrices column-major, so each output is the transpose of what the
+        caller sees: ``T.T`` gives a row-major 4 × 4, ``J.T`` (k × 3) a row-major 3 × k.
+        """
+        position = self.T[:3, 3]
+        if kind == "fk":
+            return self.T.T
+        if kind == "position":
+            return position
+        J = self._jacobian(position, columns)
+        if kind == "position_jacobian":
+            return J.T
+        if kind == "pose_jacobian":
+            R = self.T[:3, :3]
+            dR = self._jacobian(ca.vec(R), columns)  # 9 × k, column-major vec of R
+            rows = []
+            for k in range(len(columns)):
+                W = ca.reshape(dR[:, k], 3, 3) @ R.T  # skew: dR R^T = [ω]×
+                rows.append(ca.vertcat(W[2, 1], W[0, 2], W[1, 0]))
+            omega = ca.horzcat(*rows) if rows else ca.SX(3, 0)
+            return ca.vertcat(J, omega).T
+        raise ValueError(f"unknown kind {kind!r}; expected one of {KINDS}")
+
+    def function(self, kind: str, columns: tuple[int, ...] = ()) -> ca.Function:
+        """A CasADi Function ``(q, p) -> out`` for one pose, dense output, CSE applied."""
+        out = ca.densify(self.expression(kind, columns))
+        f = ca.Function(f"casecal_{kind}", [self.q, self.pext], [out], ["q", "p"], ["out"],
+                        {"cse": True})  # fmt: skip
+        if f.has_free():
+            raise RuntimeError(f"internal error: {kind} graph has free symbols")
+        return f
+
+    def evaluate(self, kind: str, q: np.ndarray, p: np.ndarray, columns=()) -> np.ndarray:
+        """Evaluate `kind` at N poses in one call.
+
+        Parameters
+        ----------
+        kind : {"fk", "position", "position_jacobian", "pose_jacobian"}
+        q : ndarray, shape (N, dof), float64
+            Joint values (rad for R, m for P), already validated.
+        p : ndarray, shape (n_params,), float64
+            Full parameter vector, SI (extended here with the cosines and sines).
+        columns : tuple of int
+            Parameter indices for the Jacobians.
+
+        Returns
+        -------
+        ndarray, shape (N, 4, 4), (N, 3), (N, 3, k) or (N, 6, k)
+        """
+        key = (kind, tuple(columns))
+        evaluator = self._evaluators.get(key)
+        if evaluator is None:
+            evaluator = self._evaluators[key] = _Evaluator(self.function(kind, key[1]))
+        return evaluator(q, self.extended(p))
+
+
+class _Evaluator:
+    """Batched evaluation of a one-pose Function: compiled C if possible, else CasADi."""
+
+    def __init__(self, function: ca.Function):
+        self.function = function
+        self.shape = function.size_out(0)  # CasADi (rows, cols) of the transposed output
+        self._native = None
+        self._native_tried = False
+
+    def __call__(self, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+        n = q.shape[0]
+        rows, cols = self.shape
+        out_shape = (n, cols, rows) if cols > 1 else (n, rows)
+        if self._use_native(n):
+            out = np.empty(out_shape)
+            self._native(q, p, out)
+            return out
+        # CasADi evaluates all N poses in one call when q has N times the expected columns.
+        res = np.asarray(self.function(q.T, p), dtype=float)  # (rows, cols * n)
+        if cols == 1:
+            return res.T.copy()
+        return res.T.reshape(n, cols, rows)
+
+    def _use_native(self, n: int) -> bool:
+        backend = os.environ.get("CASECAL_BACKEND", "auto")
+        if backend == "casadi" or (backend == "auto" and n < COMPILE_MIN_POSES):
+            return False
+        if not self._native_tried:
+            self._native_tried = True
+            self._native = _native.compile_function(self.function)
+        if self._native is None and backend == "c":
+            raise RuntimeError("CASECAL_BACKEND=c but no C compiler could build the kernel")
+        return self._native is not None
+
+
+@cache
+def chain(structure: Structure) -> Chain:
+    """The one `Chain` of a structure (built once per process)."""
+    log.debug("building CasADi chain for %s", structure)
+    return Chain(structure)

@@ -1,0 +1,84 @@
+"""Measurements of a robot's tool point, and their simulation from a 'true' robot."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CalibrationError
+from .robot import Robot, check_joint_values
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """Joint readings and the measured tool-point positions at those poses.
+
+    Attributes
+    ----------
+    q : ndarray, shape (N, dof)
+        Joint values, rad (R) or m (P).
+    positions : ndarray, shape (N, 3)
+        Measured tool-point positions in the world frame, m.
+    sigma : ndarray, shape (3,)
+        Standard deviation of the measurement noise per axis (x, y, z), m. Zero means
+        noise-free (simulated) data.
+    kind : str
+        ``"position"``.
+    """
+
+    q: np.ndarray
+    positions: np.ndarray
+    sigma: np.ndarray
+    kind: str = "position"
+
+    def __post_init__(self) -> None:
+        q = np.atleast_2d(np.asarray(self.q, dtype=float))
+        y = np.atleast_2d(np.asarray(self.positions, dtype=float))
+        if y.shape != (q.shape[0], 3):
+            raise CalibrationError(
+                f"measured positions have shape {y.shape}; expected ({q.shape[0]}, 3), "
+                "one x, y, z row per pose"
+            )
+        if not np.all(np.isfinite(y)):
+            raise CalibrationError("measured positions contain NaN or inf; remove those rows")
+        sigma = np.broadcast_to(np.asarray(self.sigma, dtype=float), (3,)).copy()
+        if np.any(sigma < 0) or not np.all(np.isfinite(sigma)):
+            raise CalibrationError(f"noise sigma {sigma} must be finite and non-negative (m)")
+        for name, value in (("q", q), ("positions", y), ("sigma", sigma)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def n_poses(self) -> int:
+        """Number of poses N."""
+        return self.q.shape[0]
+
+
+def simulate(true_robot: Robot, q, noise=0.0, seed=None) -> Measurements:
+    """Position measurements of `true_robot` at poses `q`, with isotropic Gaussian noise.
+
+    Parameters
+    ----------
+    true_robot : Robot
+        The robot as it really is (e.g. ``nominal.with_deviations({...})``).
+    q : array-like, shape (N, dof)
+        Joint values, rad (R) or m (P).
+    noise : float or array-like of 3 floats
+        Standard deviation of the noise on each coordinate, m (e.g. ``0.01e-3`` for
+        0.01 mm). Default 0: exact positions.
+    seed : int, numpy Generator or None
+        Randomness of the noise; give an int for reproducible data.
+
+    Returns
+    -------
+    Measurements
+    """
+    q2, _ = check_joint_values(q, true_robot.dof)
+    sigma = np.broadcast_to(np.asarray(noise, dtype=float), (3,))
+    if np.any(sigma < 0) or not np.all(np.isfinite(sigma)):
+        raise CalibrationError(f"noise {noise!r} must be finite and non-negative (m)")
+    positions = true_robot.position(q2)
+    if np.any(sigma > 0):
+        positions = positions + np.random.default_rng(seed).normal(size=positions.shape) * sigma
+    return Measurements(q=q2, positions=positions, sigma=sigma.copy())

@@ -1,0 +1,125 @@
+"""Names, units and selection of the geometric parameters of a serial arm.
+
+The full parameter vector of a robot is, in this order:
+
+- per joint ``i`` (1-based, base to tip): ``theta{i}``, ``d{i}``, ``a{i}``, ``alpha{i}``, and
+  ``beta{i}`` for the links that carry Hayati's extra rotation (see `casecal.kinematics`);
+- the base frame: ``base_x``, ``base_y``, ``base_z`` (m), ``base_rx``, ``base_ry``,
+  ``base_rz`` (rad);
+- the tool frame: ``tool_x`` … ``tool_rz``, likewise.
+
+Lengths are in metres and angles in radians everywhere inside casecal.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import re
+from collections.abc import Iterable, Sequence
+
+from .errors import CalibrationError
+
+JOINT_FAMILIES = ("theta", "d", "a", "alpha", "beta")
+FRAME_AXES = ("x", "y", "z", "rx", "ry", "rz")
+LENGTH_FAMILIES = frozenset({"d", "a"})
+_JOINT_RE = re.compile(r"^(theta|alpha|beta|d|a)(\d+)$")
+
+
+def frame_names(frame: str) -> tuple[str, ...]:
+    """The six names of a frame's parameters, e.g. ``base_x`` … ``base_rz``."""
+    return tuple(f"{frame}_{axis}" for axis in FRAME_AXES)
+
+
+def parameter_names(n_joints: int, beta_joints: Iterable[int]) -> tuple[str, ...]:
+    """Names of the full parameter vector, in canonical order.
+
+    Parameters
+    ----------
+    n_joints : int
+        Number of joints.
+    beta_joints : iterable of int
+        1-based indices of the links that carry a Hayati ``beta``.
+
+    Returns
+    -------
+    tuple of str, length ``4 * n_joints + len(beta_joints) + 12``
+    """
+    betas = set(beta_joints)
+    names: list[str] = []
+    for i in range(1, n_joints + 1):
+        names += [f"theta{i}", f"d{i}", f"a{i}", f"alpha{i}"]
+        if i in betas:
+            names.append(f"beta{i}")
+    return (*names, *frame_names("base"), *frame_names("tool"))
+
+
+def is_length(name: str) -> bool:
+    """True for parameters measured in metres, False for those in radians."""
+    match = _JOINT_RE.match(name)
+    if match:
+        return match.group(1) in LENGTH_FAMILIES
+    return name.rsplit("_", 1)[-1] in ("x", "y", "z")
+
+
+def unit(name: str) -> str:
+    """SI unit of a parameter: ``"m"`` or ``"rad"``."""
+    return "m" if is_length(name) else "rad"
+
+
+def select(
+    names: Sequence[str], spec: str | Iterable[str] | None, default: str = "all"
+) -> list[str]:
+    """Resolve a ``parameters=`` argument into names, in canonical order.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Every parameter of the robot, in canonical order.
+    spec : str, iterable of str or None
+        ``"all"``; an exact name (``"theta2"``); a family (``"a"`` or ``"a*"`` means
+        ``a1 … an``, the ``*`` standing for the joint index only, so it never catches
+        ``alpha2``); ``"base"``/``"base_*"`` or ``"tool"``/``"tool_*"`` for a frame's six
+        parameters; or any other shell-style pattern (``"theta[1-3]"``, ``"base_r*"``).
+        A comma-separated string is split. ``None`` means `default`.
+    default : str
+        What ``None`` means.
+
+    Returns
+    -------
+    list of str
+        The matched names, each once, in the order of `names`.
+
+    Raises
+    ------
+    CalibrationError
+        When a token matches nothing.
+    """
+    if spec is None:
+        spec = default
+    tokens = [t.strip() for t in spec.split(",")] if isinstance(spec, str) else list(spec)
+    chosen: set[str] = set()
+    for token in tokens:
+        if not isinstance(token, str) or not token:
+            raise CalibrationError(f"parameter selection {token!r} is not a non-empty string")
+        matched = _match(names, token)
+        if not matched:
+            raise CalibrationError(
+                f"parameter selection {token!r} matches no parameter of this robot; "
+                f"use 'all', a family ({', '.join(f + '*' for f in JOINT_FAMILIES)}, base_*, "
+                f"tool_*) or names from: {', '.join(names)}"
+            )
+        chosen.update(matched)
+    return [n for n in names if n in chosen]
+
+
+def _match(names: Sequence[str], token: str) -> list[str]:
+    if token == "all":
+        return list(names)
+    if token in names:
+        return [token]
+    family = token[:-1] if token.endswith("*") else token
+    if family in JOINT_FAMILIES:
+        return [n for n in names if (m := _JOINT_RE.match(n)) and m.group(1) == family]
+    if family.rstrip("_") in ("base", "tool"):
+        return [n for n in names if n.startswith(family.rstrip("_") + "_")]
+    return [n for n in names if fnmatch.fnmatchcase(n, token)]

@@ -1,0 +1,324 @@
+"""The robot model: immutable joints, frames and the forward kinematics API on top of them."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import InitVar, dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from . import kinematics
+from .errors import CalibrationError
+from .parameters import FRAME_AXES, select
+
+DEFAULT_REVOLUTE_LIMITS = (-math.pi, math.pi)
+"""Limits (rad) assumed for a revolute joint whose table gives none."""
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One row of a DH table, in SI units.
+
+    Attributes
+    ----------
+    type : {"R", "P"}
+        Revolute (q adds to ``theta``) or prismatic (q adds to ``d``).
+    a, d : float
+        Link length and link offset, m.
+    alpha, theta : float
+        Link twist and constant joint-angle offset, rad.
+    beta : float or None
+        Hayati's tilt about the link's y axis, rad; None when the link has none
+        (see `casecal.kinematics`).
+    limits : (float, float) or None
+        Joint range, rad (R) or m (P); None when no source gives one.
+    """
+
+    type: str
+    a: float
+    alpha: float
+    d: float
+    theta: float = 0.0
+    beta: float | None = None
+    limits: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A rigid transform ``Trans(xyz) · Rz(rz) Ry(ry) Rx(rx)``.
+
+    xyz in m; rpy = (rx, ry, rz) in rad.
+    """
+
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def matrix(self) -> np.ndarray:
+        """The 4 × 4 homogeneous matrix, shape (4, 4)."""
+        cs = [(np.cos(v), np.sin(v)) for v in self.rpy]
+        return np.array(ca.evalf(kinematics.frame_transform(self.xyz, cs)), dtype=float)
+
+
+@dataclass(frozen=True)
+class Robot:
+    """An immutable serial arm: DH table, convention, base and tool frames.
+
+    Build one with `casecal.load_robot`; derive variants with `with_deviations` and
+    `with_parameters`. All numbers are SI (m, rad).
+
+    Attributes
+    ----------
+    name : str
+    joints : tuple of Joint
+        Base to tip.
+    convention : {"dh", "mdh"}
+        Standard DH or modified DH (Craig); see `casecal.kinematics`.
+    base, tool : Frame
+        World-to-first-frame and flange-to-tool-point transforms.
+    full_name, source, confidence : str, tuple of str, str
+        Where the numbers come from and how sure that source is.
+    auto_beta : bool, init only
+        Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
+        ``beta`` is None (the rule in `casecal.kinematics`). Default True.
+    """
+
+    name: str
+    joints: tuple[Joint, ...]
+    convention: str = "dh"
+    base: Frame = field(default_factory=Frame)
+    tool: Frame = field(default_factory=Frame)
+    full_name: str = ""
+    source: tuple[str, ...] = ()
+    confidence: str = ""
+    auto_beta: InitVar[bool] = True
+
+    def __post_init__(self, auto_beta: bool) -> None:
+        if self.convention not in ("dh", "mdh"):
+            raise CalibrationError(
+                f"robot {self.name!r}: convention {self.convention!r} is unknown; "
+                "use 'dh' (standard) or 'mdh' (modified/Craig)"
+            )
+        joints = tuple(self.joints)
+        if not joints:
+            raise CalibrationError(f"robot {self.name!r} has no joints; give at least one")
+        for i, joint in enumerate(joints, start=1):
+            if joint.type not in ("R", "P"):
+                raise CalibrationError(
+                    f"robot {self.name!r}, joint {i}: type {joint.type!r} is unknown; "
+                    "use 'R' or 'P'"
+                )
+            values = [joint.a, joint.alpha, joint.d, joint.theta, joint.beta or 0.0]
+            if not all(math.isfinite(v) for v in values):
+                raise CalibrationError(f"robot {self.name!r}, joint {i}: a non-finite DH value")
+        if auto_beta:
+            n = len(joints)
+            joints = tuple(
+                dataclasses.replace(j, beta=0.0)
+                if j.beta is None and kinematics.needs_beta(self.convention, i, n, j.alpha)
+                else j
+                for i, j in enumerate(joints, start=1)
+            )
+        object.__setattr__(self, "joints", joints)
+        object.__setattr__(self, "source", tuple(self.source))
+
+    # --- description ------------------------------------------------------------------
+
+    @property
+    def dof(self) -> int:
+        """Number of joints."""
+        return len(self.joints)
+
+    @property
+    def joint_types(self) -> str:
+        """One letter per joint, e.g. ``"RRPR"``."""
+        return "".join(j.type for j in self.joints)
+
+    @property
+    def structure(self) -> kinematics.Structure:
+        """What the CasADi graph depends on (everything but the numbers)."""
+        betas = tuple(i for i, j in enumerate(self.joints, start=1) if j.beta is not None)
+        return kinematics.Structure(self.convention, self.joint_types, betas)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of every geometric parameter, in canonical order."""
+        return self.structure.names
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Every geometric parameter by name, SI (m, rad), in canonical order."""
+        return dict(zip(self.parameter_names, self.vector().tolist(), strict=True))
+
+    def vector(self) -> np.ndarray:
+        """The full parameter vector, shape (n_params,), in the order of `parameter_names`."""
+        values: list[float] = []
+        for j in self.joints:
+            values += [j.theta, j.d, j.a, j.alpha]
+            if j.beta is not None:
+                values.append(j.beta)
+        values += [*self.base.xyz, *self.base.rpy, *self.tool.xyz, *self.tool.rpy]
+        return np.array(values, dtype=float)
+
+    @property
+    def limits(self) -> np.ndarray:
+        """Joint limits, shape (dof, 2), rad or m; revolute joints without limits get ±π.
+
+        Raises
+        ------
+        CalibrationError
+            For a prismatic joint without limits (there is no sensible default stroke).
+        """
+        rows = []
+        for i, j in enumerate(self.joints, start=1):
+            if j.limits is not None:
+                rows.append(j.limits)
+            elif j.type == "R":
+                rows.append(DEFAULT_REVOLUTE_LIMITS)
+            else:
+                raise CalibrationError(
+                    f"robot {self.name!r}: prismatic joint {i} has no limits; add "
+                    "'limits = [min, max]' to its [[joints]] table"
+                )
+        return np.array(rows, dtype=float)
+
+    # --- variants ---------------------------------------------------------------------
+
+    def with_parameters(self, values: Mapping[str, float]) -> Robot:
+        """A new Robot with the named parameters set to `values` (SI); the rest unchanged."""
+        p = self.parameters
+        for name, value in values.items():
+            if name not in p:
+                raise CalibrationError(
+                    f"robot {self.name!r} has no parameter {name!r}; "
+                    f"its parameters are: {', '.join(p)}"
+                )
+            value = float(value)
+            if not math.isfinite(value):
+                raise CalibrationError(f"parameter {name!r}: value {value} is not finite")
+            p[name] = value
+        joints = []
+        for i, j in enumerate(self.joints, start=1):
+            beta = p[f"beta{i}"] if j.beta is not None else None
+            joints.append(dataclasses.replace(
+                j, theta=p[f"theta{i}"], d=p[f"d{i}"], a=p[f"a{i}"], alpha=p[f"alpha{i}"],
+                beta=beta,
+            ))  # fmt: skip
+
+        def frame(prefix: str) -> Frame:
+            v = [p[f"{prefix}_{axis}"] for axis in FRAME_AXES]
+            return Frame(tuple(v[:3]), tuple(v[3:]))
+
+        return dataclasses.replace(
+            self, joints=tuple(joints), base=frame("base"), tool=frame("tool"), auto_beta=False
+        )
+
+    def with_deviations(self, deviations: Mapping[str, float]) -> Robot:
+        """A new Robot with `deviations` (SI: m, rad) added to the named parameters.
+
+        Examples
+        --------
+        >>> true = robot.with_deviations({"theta1": 1.745e-4, "a2": -2e-4})  # doctest: +SKIP
+        """
+        p = self.parameters
+        unknown = [n for n in deviations if n not in p]
+        if unknown:
+            raise CalibrationError(
+                f"robot {self.name!r} has no parameter {unknown[0]!r}; "
+                f"its parameters are: {', '.join(p)}"
+            )
+        return self.with_parameters({n: p[n] + float(v) for n, v in deviations.items()})
+
+    # --- kinematics -------------------------------------------------------------------
+
+    def fk(self, q) -> np.ndarray:
+        """End-effector pose (tool frame in world).
+
+        Parameters
+        ----------
+        q : array-like, shape (dof,) or (N, dof)
+            Joint values, rad (R) or m (P).
+
+        Returns
+        -------
+        ndarray, shape (4, 4) or (N, 4, 4)
+            Homogeneous transforms, translation in m.
+        """
+        return self._evaluate("fk", q)
+
+    def position(self, q) -> np.ndarray:
+        """Tool-point position, m: shape (3,) for q (dof,), (N, 3) for q (N, dof)."""
+        return self._evaluate("position", q)
+
+    def position_jacobian(self, q, parameters=None) -> tuple[np.ndarray, list[str]]:
+        """Exact Jacobian of the tool-point position with respect to geometric parameters.
+
+        Parameters
+        ----------
+        q : array-like, shape (dof,) or (N, dof)
+            Joint values, rad (R) or m (P).
+        parameters : str, list of str or None
+            Which parameters (names, families or ``"all"``; see `casecal.parameters.select`).
+            Default None: every parameter.
+
+        Returns
+        -------
+        J : ndarray, shape (3, k) or (N, 3, k)
+            ∂position/∂p; m/m for lengths, m/rad for angles.
+        names : list of str
+            The k parameter names, in column order.
+        """
+        names = select(self.parameter_names, parameters)
+        return self._evaluate("position_jacobian", q, names), names
+
+    def pose_jacobian(self, q, parameters=None) -> tuple[np.ndarray, list[str]]:
+        """Exact Jacobian of the pose error ``(δposition, δφ)`` with respect to parameters.
+
+        The orientation error δφ is the rotation vector of ``R(p + δp) R(p)ᵀ`` (world frame),
+        so column ``k`` of rows 3-5 is ``vee(∂R/∂p_k Rᵀ)``.
+
+        Returns
+        -------
+        J : ndarray, shape (6, k) or (N, 6, k)
+            Rows 0-2 in m per unit parameter, rows 3-5 in rad per unit parameter.
+        names : list of str
+        """
+        names = select(self.parameter_names, parameters)
+        return self._evaluate("pose_jacobian", q, names), names
+
+    def _evaluate(self, kind: str, q, names: Sequence[str] = ()) -> np.ndarray:
+        q2, single = check_joint_values(q, self.dof)
+        ch = kinematics.chain(self.structure)
+        out = ch.evaluate(kind, q2, self.vector(), ch.columns(names) if names else ())
+        return out[0] if single else out
+
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, {self.joint_types}, convention={self.convention!r})"
+
+
+def check_joint_values(q, dof: int) -> tuple[np.ndarray, bool]:
+    """Validate joint values and return them as a C-contiguous float64 (N, dof) array.
+
+    Returns
+    -------
+    q : ndarray, shape (N, dof)
+    single : bool
+        True when the input was one pose of shape (dof,).
+    """
+    try:
+        arr = np.asarray(q, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(f"joint values are not numbers: {exc}") from None
+    single = arr.ndim == 1
+    arr = np.atleast_2d(arr)
+    if arr.ndim != 2 or arr.shape[1] != dof:
+        raise CalibrationError(
+            f"joint values have shape {np.shape(q)}; this robot has {dof} joints, so give "
+            f"shape ({dof},) for one pose or (N, {dof}) for N poses"
+        )
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.argwhere(~np.isfinite(arr))[0][0])
+        raise CalibrationError(f"joint values of pose {bad} are not finite (NaN or inf)")
+    return np.ascontiguousarray(arr), single
