@@ -6,18 +6,25 @@ flow and README.md for the commands.
 """
 
 from . import poses
+from .calibration import Calibration
 from .catalog import load_robot, robot_to_toml, robots
 from .errors import CalibrationError
+from .identifiability import Observability, observability
+from .identification import identify
 from .measurements import Measurements, simulate
 from .robot import Frame, Joint, Robot
 
 __all__ = [
+    "Calibration",
     "CalibrationError",
     "Frame",
     "Joint",
     "Measurements",
+    "Observability",
     "Robot",
+    "identify",
     "load_robot",
+    "observability",
     "poses",
     "robot_to_toml",
     "robots",

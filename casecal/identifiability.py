@@ -1,0 +1,323 @@
+"""What a set of poses lets us see: rank, blind parameter combinations, observability indices.
+
+Everything here works on the *scaled* identification Jacobian: each column of the stacked
+3N × k Jacobian divided by its norm, so that metres and radians do not decide the rank. A
+direction whose scaled singular value is below `RANK_TOLERANCE` times the largest is blind:
+moving the parameters along it changes no measured position (to first order).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from .errors import CalibrationError
+from .parameters import select, unit
+from .robot import Robot, check_joint_values
+
+RANK_TOLERANCE = 1e-8
+"""Relative singular-value threshold of the scaled Jacobian below which a direction is blind.
+
+Structurally blind directions sit at ~1e-16 (rounding); a direction at 1e-8 would amplify
+measurement noise 1e8-fold, which no calibration can use. Between lies a wide gap.
+"""
+
+DEFAULT_PARAMETERS = ("theta*", "a*", "d*")
+"""The paper's error set: θ, a, d per joint, α fixed."""
+
+
+@dataclass(frozen=True)
+class BlindSpot:
+    """A group of parameters whose individual values the measurements cannot separate.
+
+    Attributes
+    ----------
+    members : tuple of str
+        The parameters of the group.
+    blind : tuple of str
+        Combinations that move no measured point (a basis of the null space in the group),
+        written with coefficients in physical units, e.g. ``"d2 - d4"``.
+    visible : str or None
+        When the group's columns are all parallel: the one combination the data do see,
+        e.g. ``"d2 + d3 + d4"``; None when the group has none (a zero column) or several.
+    text : str
+        One sentence in words.
+    """
+
+    members: tuple[str, ...]
+    blind: tuple[str, ...]
+    visible: str | None
+    text: str
+
+
+@dataclass(frozen=True)
+class Observability:
+    """Identifiability of a parameter set from a set of poses (see `observability`).
+
+    Attributes
+    ----------
+    parameters : tuple of str
+        The parameters asked about, canonical order.
+    singular_values : ndarray, shape (k,)
+        Of the column-scaled Jacobian, descending (zero columns contribute zeros).
+    rank : int
+        Number of independent directions the data see.
+    identifiable, unidentifiable : tuple of str
+        A parameter is unidentifiable when it has a component in the null space.
+    blind_spots : tuple of BlindSpot
+    base_parameters : tuple of str
+        A largest identifiable subset (QR in canonical pivot order: the first parameter of
+        each blind group); the others can be held at nominal without losing any fit.
+    indices : dict
+        Observability indices of the base set's scaled Jacobian, with N poses and
+        singular values s1 ≥ … ≥ sr: ``O1`` = (s1⋯sr)^(1/r) / √N (Borm & Menq), ``O2`` =
+        s1/sr (condition number), ``O3`` = sr (minimum singular value), ``O4`` = sr²/s1
+        (noise amplification, Nahvi & Hollerbach), ``O5`` = sr/s1 (inverse condition).
+    column_norms : ndarray, shape (k,)
+        The scaling: norm of each unscaled column, m per m or m per rad.
+    n_poses : int
+    """
+
+    parameters: tuple[str, ...]
+    singular_values: np.ndarray
+    rank: int
+    identifiable: tuple[str, ...]
+    unidentifiable: tuple[str, ...]
+    blind_spots: tuple[BlindSpot, ...]
+    base_parameters: tuple[str, ...]
+    indices: dict = field(default_factory=dict)
+    column_norms: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    n_poses: int = 0
+
+    @property
+    def combinations(self) -> list[str]:
+        """The blind spots in words, one sentence each."""
+        return [b.text for b in self.blind_spots]
+
+    @property
+    def condition_number(self) -> float:
+        """O2 of the base set (inf when nothing is identifiable)."""
+        return self.indices.get("O2", float("inf"))
+
+    def __str__(self) -> str:
+        lines = [
+            f"{len(self.parameters)} parameters, {self.n_poses} poses: rank {self.rank}",
+            f"identifiable:   {', '.join(self.identifiable) or '(none)'}",
+            f"unidentifiable: {', '.join(self.unidentifiable) or '(none)'}",
+        ]
+        lines += [f"  - {text}" for text in self.combinations]
+        lines.append("indices: " + ", ".join(f"{k} = {v:.4g}" for k, v in self.indices.items()))
+        return "\n".join(lines)
+
+
+def observability(robot: Robot, q, parameters=DEFAULT_PARAMETERS, measurement="position"):
+    """Which parameters a set of poses can identify, and which combinations it cannot.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot (the Jacobian is taken at its parameters).
+    q : array-like, shape (N, dof)
+        Poses, rad (R) or m (P).
+    parameters : str or list of str
+        Names, families or ``"all"`` (see `casecal.parameters.select`). Default: the
+        paper's set θ, a, d.
+    measurement : {"position"}
+        What is measured at each pose.
+
+    Returns
+    -------
+    Observability
+    """
+    if measurement != "position":
+        raise CalibrationError(f"measurement {measurement!r} is not supported; use 'position'")
+    q2, _ = check_joint_values(q, robot.dof)
+    J, names = robot.position_jacobian(q2, parameters)
+    return analyse(J.reshape(-1, len(names)), names, n_poses=q2.shape[0])
+
+
+def analyse(J: np.ndarray, names, n_poses: int, tolerance: float = RANK_TOLERANCE):
+    """`observability` for a stacked Jacobian (rows: measurements, columns: `names`)."""
+    names = tuple(names)
+    k = len(names)
+    norms = np.linalg.norm(J, axis=0)
+    zero = norms <= tolerance * max(norms.max(initial=0.0), np.finfo(float).tiny)
+    Js = np.zeros_like(J)
+    Js[:, ~zero] = J[:, ~zero] / norms[~zero]
+    s = np.linalg.svd(Js, compute_uv=False) if k else np.zeros(0)
+    s_max = s[0] if s.size else 0.0
+    rank = int(np.sum(s > tolerance * s_max)) if s_max > 0 else 0
+
+    null = _null_space(Js[:, ~zero], tolerance)  # (k_nonzero, r)
+    live = [n for n, z in zip(names, zero, strict=True) if not z]
+    blind_rows = _rref(null.T, 1e-9) if null.size else np.zeros((0, len(live)))
+    spots = [_zero_column_spot(n) for n, z in zip(names, zero, strict=True) if z]
+    spots += _group_spots(blind_rows, live, J[:, ~zero])
+    unident = {m for spot in spots for m in spot.members}
+
+    base = _base_parameters(Js, names, zero, rank)
+    return Observability(
+        parameters=names,
+        singular_values=s,
+        rank=rank,
+        identifiable=tuple(n for n in names if n not in unident),
+        unidentifiable=tuple(n for n in names if n in unident),
+        blind_spots=tuple(spots),
+        base_parameters=base,
+        indices=indices(Js[:, [names.index(b) for b in base]], n_poses),
+        column_norms=norms,
+        n_poses=n_poses,
+    )
+
+
+def indices(Js: np.ndarray, n_poses: int) -> dict:
+    """O1 … O5 of a column-scaled Jacobian (definitions in `Observability`)."""
+    s = np.linalg.svd(Js, compute_uv=False) if Js.size else np.zeros(0)
+    if s.size == 0 or s[-1] <= 0:
+        return {"O1": 0.0, "O2": float("inf"), "O3": 0.0, "O4": 0.0, "O5": 0.0}
+    return {
+        "O1": float(np.exp(np.mean(np.log(s))) / np.sqrt(n_poses)),
+        "O2": float(s[0] / s[-1]),
+        "O3": float(s[-1]),
+        "O4": float(s[-1] ** 2 / s[0]),
+        "O5": float(s[-1] / s[0]),
+    }
+
+
+def _null_space(Js: np.ndarray, tolerance: float) -> np.ndarray:
+    if Js.shape[1] == 0:
+        return np.zeros((0, 0))
+    _, s, Vt = np.linalg.svd(Js, full_matrices=True)
+    s_full = np.zeros(Js.shape[1])
+    s_full[: s.size] = s
+    blind = s_full <= tolerance * s_full[0] if s_full[0] > 0 else np.ones_like(s_full, bool)
+    return Vt[blind].T
+
+
+def _rref(A: np.ndarray, tol: float) -> np.ndarray:
+    """Reduced row echelon form: a sparse basis of the row space, groups kept apart."""
+    A = A.astype(float).copy()
+    rows, cols = A.shape
+    r = 0
+    for c in range(cols):
+        if r == rows:
+            break
+        pivot = r + int(np.argmax(np.abs(A[r:, c])))
+        if abs(A[pivot, c]) <= tol:
+            continue
+        A[[r, pivot]] = A[[pivot, r]]
+        A[r] /= A[r, c]
+        for i in range(rows):
+            if i != r:
+                A[i] -= A[i, c] * A[r]
+        r += 1
+    A[np.abs(A) <= tol] = 0.0
+    return A[:r]
+
+
+def _zero_column_spot(name: str) -> BlindSpot:
+    return BlindSpot(
+        members=(name,),
+        blind=(name,),
+        visible=None,
+        text=f"{name}: its column is zero, it does not move the measured point at these poses",
+    )
+
+
+def _group_spots(rows: np.ndarray, names: list[str], J: np.ndarray) -> list[BlindSpot]:
+    """Split blind directions into groups of parameters that share them, and describe each."""
+    if rows.size == 0:
+        return []
+    support = rows != 0
+    # union of rows that share a parameter: connected components
+    groups: list[set[int]] = []
+    for row in support:
+        members = set(np.flatnonzero(row))
+        merged = [g for g in groups if g & members]
+        for g in merged:
+            members |= g
+            groups.remove(g)
+        groups.append(members)
+    spots = []
+    for g in sorted(groups, key=min):
+        idx = sorted(g)
+        members = tuple(names[i] for i in idx)
+        g_rows = rows[[bool(support[r][idx].any()) for r in range(rows.shape[0])]]
+        # rows are in the scaled coordinates: convert to physical coefficients
+        norms = np.linalg.norm(J[:, idx], axis=0)
+        blind = tuple(_expression(row[idx] / norms, members) for row in g_rows)
+        visible = None
+        if len(idx) - len(g_rows) == 1:  # the group's columns are all parallel
+            ref = J[:, idx[0]]
+            coeffs = J[:, idx].T @ ref / (ref @ ref)
+            visible = _expression(coeffs, members)
+            text = (f"{', '.join(members)}: only {visible} is identifiable, "
+                    "not the parameters alone (their columns are parallel)")  # fmt: skip
+        else:
+            text = (f"{', '.join(members)}: {len(g_rows)} combinations are blind: "
+                    + "; ".join(blind))  # fmt: skip
+        spots.append(BlindSpot(members, blind, visible, text))
+    return spots
+
+
+def _expression(coeffs: np.ndarray, members) -> str:
+    """``c1*p1 + c2*p2 …`` normalised so the first coefficient is 1, units on the others."""
+    lead = int(np.flatnonzero(np.abs(coeffs) > 1e-12 * np.abs(coeffs).max())[0])
+    coeffs = coeffs / coeffs[lead]
+    ref_unit = unit(members[lead])
+    terms = []
+    for c, name in zip(coeffs, members, strict=True):
+        if abs(c) <= 1e-9:
+            continue
+        sign = "-" if c < 0 else "+"
+        mag = abs(c)
+        u = unit(name)
+        if np.isclose(mag, 1.0, rtol=1e-6) and u == ref_unit:
+            term = name
+        else:
+            scale = "" if u == ref_unit else f" {ref_unit}/{u}"
+            term = f"{mag:.4g}{scale}·{name}"
+        terms.append((sign, term))
+    text = terms[0][1] if terms[0][0] == "+" else "-" + terms[0][1]
+    for sign, term in terms[1:]:
+        text += f" {sign} {term}"
+    return text
+
+
+def _base_parameters(Js: np.ndarray, names, zero: np.ndarray, rank: int) -> tuple[str, ...]:
+    """A largest independent subset of columns: QR with the pivot order fixed.
+
+    Columns are taken in canonical order (theta1, d1, a1, alpha1, …, base, tool) and kept
+    when their component orthogonal to the columns kept so far exceeds the rank tolerance
+    (Gram-Schmidt, applied twice for stability). So the first parameter of each blind group
+    is estimated and the later ones are held: a predictable choice, where LAPACK's
+    largest-norm pivoting would pick among equal-norm scaled columns by rounding noise.
+    Falls back to pivoted QR (geqp3) if the greedy pass disagrees with the SVD rank.
+    """
+    if rank == 0:
+        return ()
+    basis = np.zeros((Js.shape[0], 0))
+    chosen = []
+    for i, name in enumerate(names):
+        if zero[i]:
+            continue
+        v = Js[:, i].copy()
+        for _ in range(2):
+            v -= basis @ (basis.T @ v)
+        norm = np.linalg.norm(v)
+        if norm > np.sqrt(RANK_TOLERANCE):
+            basis = np.column_stack([basis, v / norm])
+            chosen.append(name)
+    if len(chosen) != rank:
+        _, _, perm = scipy.linalg.qr(Js, mode="economic", pivoting=True)
+        chosen = [names[i] for i in perm[:rank] if not zero[i]]
+    return tuple(n for n in names if n in chosen)
+
+
+def selection(robot: Robot, parameters) -> list[str]:
+    """Resolve `parameters` for `robot` (default: the paper's θ, a, d)."""
+    if parameters is None:
+        parameters = list(DEFAULT_PARAMETERS)
+    return select(robot.parameter_names, parameters)

@@ -1,0 +1,119 @@
+"""Text summary of a Calibration, in the manner of statsmodels' ``summary()``.
+
+No timestamp and no mutation: the same result gives the same text.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from .calibration import Calibration, Summary
+
+WIDTH = 96
+CONDITION_WARNING = 1e3
+
+
+def _fmt(value, digits: int = 5) -> str:
+    if isinstance(value, str):
+        return value
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    return f"{value:.{digits}f}"
+
+
+def format_table(df: pd.DataFrame) -> str:
+    """Fixed-width text of a parameter table (numbers to 5 decimals, mm and degrees)."""
+    cols = [c for c in df.columns if c != "status"]
+    cells = [[str(c) for c in cols]]
+    for _, row in df.iterrows():
+        cells.append(
+            [
+                row[c] if c in ("parameter", "unit") else _fmt(row[c], 4 if c == "error_pct" else 5)
+                for c in cols
+            ]
+        )
+    widths = [max(len(r[i]) for r in cells) for i in range(len(cols))]
+    lines = []
+    for k, r in enumerate(cells):
+        line = "  ".join(
+            c.ljust(w) if i < 2 else c.rjust(w)
+            for i, (c, w) in enumerate(zip(r, widths, strict=True))
+        )
+        lines.append(line)
+        if k == 0:
+            lines.append("-" * len(line))
+    return "\n".join(lines)
+
+
+def build_summary(cal: Calibration) -> Summary:
+    """Header, table, diagnostics and numbered notes of `cal`."""
+    obs = cal.observability
+    left = [
+        ("Robot:", f"{cal.nominal.name} ({cal.nominal.joint_types}, {cal.nominal.convention})"),
+        ("Method:", cal.method),
+        ("Status:", f"{cal.status} ({'success' if cal.success else 'FAILED'})"),
+        ("Poses:", f"{cal.n_poses} ({3 * cal.n_poses} coordinates)"),
+        ("Parameters:", f"{len(cal.parameters)} asked, {len(cal.estimated)} estimated"),
+        ("Iterations:", str(cal.iterations)),
+    ]
+    right = [
+        ("RMS before:", f"{cal.rms_before * 1e3:.6f} mm"),
+        ("RMS after:", f"{cal.rms * 1e3:.6f} mm"),
+        ("Max before:", f"{cal.max_error_before * 1e3:.6f} mm"),
+        ("Max after:", f"{cal.max_error * 1e3:.6f} mm"),
+        ("Residual dof:", str(cal.dof_residual)),
+        ("Std errors from:", "stated sigma" if cal.sigma_known else "residual scale"),
+    ]
+    title = "casecal calibration results".center(WIDTH)
+    rule = "=" * WIDTH
+    body = [f"{a:<13}{b:<35}{c:<18}{d}" for (a, b), (c, d) in zip(left, right, strict=True)]
+    header = "\n".join([rule, title, rule, *body, f"Message: {cal.message}"])
+    s = obs.singular_values
+    diag = [
+        f"Observability of the {len(obs.parameters)} asked-for parameters at nominal "
+        f"(column-scaled Jacobian): rank {obs.rank} of {len(obs.parameters)}",
+        "  indices of the estimated set: "
+        + ", ".join(f"{k} = {v:.4g}" for k, v in obs.indices.items()),
+        f"  singular values: largest {s[0]:.4g}, smallest non-zero "
+        f"{s[obs.rank - 1] if obs.rank else 0:.4g}"
+        if s.size
+        else "  no parameters",
+    ]
+    return Summary(header=header, table=cal.table, diagnostics="\n".join(diag),
+                   notes=tuple(_notes(cal)))  # fmt: skip
+
+
+def _notes(cal: Calibration) -> list[str]:
+    notes = []
+    obs = cal.observability
+    if not cal.success:
+        notes.append(f"The fit did not converge: {cal.message}. Do not use these values.")
+    if obs.blind_spots:
+        held = ", ".join(cal.held) if cal.held else "none"
+        notes.append(
+            f"The data cannot identify {len(obs.unidentifiable)} of the asked-for parameters "
+            f"individually; held at nominal: {held}."
+        )
+        for spot in obs.blind_spots:
+            notes.append(spot.text + ".")
+    cond = obs.indices.get("O2", np.inf)
+    if np.isfinite(cond) and cond > CONDITION_WARNING:
+        notes.append(
+            f"The condition number of the estimated set is {cond:.3g}: some combinations are "
+            "barely observable from these poses, and noise is amplified along them. More or "
+            "better-spread poses help."
+        )
+    if not cal.sigma_known:
+        notes.append(
+            "No measurement sigma was given: standard errors use the residual scale "
+            f"({_residual_scale(cal) * 1e3:.3g} mm per coordinate)."
+        )
+    return notes
+
+
+def _residual_scale(cal: Calibration) -> float:
+    dof = max(cal.dof_residual, 1)
+    return float(np.sqrt(np.sum(cal.residuals**2) / dof))
