@@ -91,8 +91,9 @@ def compile_function(function: ca.Function):
             _build(cc, src, lib_path)
         lib = ctypes.CDLL(str(lib_path))
     except (OSError, subprocess.CalledProcessError) as exc:
-        log.warning("could not compile %s (%s); using CasADi's own evaluation",
-                    function.name(), exc)  # fmt: skip
+        log.warning(
+            "could not compile %s (%s); using CasADi's own evaluation", function.name(), exc
+        )
         return None
     batch = lib.casecal_batch
     batch.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
@@ -119,8 +120,9 @@ def _build(cc: str, src: str, lib_path: Path) -> None:
         c_file = Path(tmp, "kernel.c")
         c_file.write_text(src)
         so_file = Path(tmp, lib_path.name)
-        subprocess.run([cc, *CFLAGS, str(c_file), "-o", str(so_file), "-lm"],
-                       check=True, capture_output=True)  # fmt: skip
+        subprocess.run(
+            [cc, *CFLAGS, str(c_file), "-o", str(so_file), "-lm"], check=True, capture_output=True
+        )
         # rename is atomic: a concurrent process sees either no file or a whole one
         os.replace(so_file, lib_path)
     log.info("compiled %s", lib_path)

@@ -36,8 +36,20 @@ from .robot import Frame, Joint, Robot
 
 _LENGTH = {"m": 1.0, "mm": 1e-3}
 _ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
-_TOP_KEYS = {"name", "convention", "length_unit", "angle_unit", "joints", "base", "tool",
-             "full_name", "variant", "source", "confidence", "description"}  # fmt: skip
+_TOP_KEYS = {
+    "name",
+    "convention",
+    "length_unit",
+    "angle_unit",
+    "joints",
+    "base",
+    "tool",
+    "full_name",
+    "variant",
+    "source",
+    "confidence",
+    "description",
+}
 _JOINT_KEYS = {"type", "a", "alpha", "d", "theta", "beta", "limits"}
 _FRAME_KEYS = {"xyz", "rpy"}
 
@@ -139,15 +151,17 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
                 raise CalibrationError(f"{label}: {where}.limits = {lim}: min must be below max")
             limits = (lo, hi)
         beta = row.get("beta")
-        joints.append(Joint(
-            type=jtype,
-            a=_number(row["a"], label, f"{where}.a") * length,
-            alpha=_number(row["alpha"], label, f"{where}.alpha") * angle,
-            d=_number(row["d"], label, f"{where}.d") * length,
-            theta=_number(row.get("theta", 0.0), label, f"{where}.theta") * angle,
-            beta=None if beta is None else _number(beta, label, f"{where}.beta") * angle,
-            limits=limits,
-        ))  # fmt: skip
+        joints.append(
+            Joint(
+                type=jtype,
+                a=_number(row["a"], label, f"{where}.a") * length,
+                alpha=_number(row["alpha"], label, f"{where}.alpha") * angle,
+                d=_number(row["d"], label, f"{where}.d") * length,
+                theta=_number(row.get("theta", 0.0), label, f"{where}.theta") * angle,
+                beta=None if beta is None else _number(beta, label, f"{where}.beta") * angle,
+                limits=limits,
+            )
+        )
     name = data.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise CalibrationError(f"{label}: name must be a non-empty string")
@@ -165,6 +179,55 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     )
 
 
+def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:
+    """Read parameter deviations from a TOML file, in SI.
+
+    The file holds ``length_unit`` and ``angle_unit`` as in robot files (default m, rad) and
+    one ``name = value`` per parameter, at the top level or under ``[deviations]``::
+
+        length_unit = "mm"
+        angle_unit = "deg"
+        [deviations]
+        theta1 = 0.01
+        a2 = -0.2
+
+    Parameters
+    ----------
+    path : str or path
+    robot : Robot, optional
+        When given, every name must be one of its parameters.
+
+    Returns
+    -------
+    dict of str to float
+        Deviations in m and rad.
+    """
+    from .parameters import is_length
+
+    label = str(path)
+    if not Path(path).is_file():
+        raise CalibrationError(f"deviations file {label!r} does not exist; check the path")
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise CalibrationError(f"{label}: not valid TOML ({exc}); fix the syntax") from None
+    length = _unit(data, "length_unit", _LENGTH, label)
+    angle = _unit(data, "angle_unit", _ANGLE, label)
+    table = data.get("deviations", {k: v for k, v in data.items() if not k.endswith("_unit")})
+    if not isinstance(table, dict) or not table:
+        raise CalibrationError(f"{label}: no deviations found; write e.g. theta1 = 0.01")
+    known = set(robot.parameter_names) if robot is not None else None
+    out = {}
+    for name, value in table.items():
+        if known is not None and name not in known:
+            raise CalibrationError(
+                f"{label}: {name!r} is not a parameter of robot {robot.name!r}; "
+                f"its parameters are: {', '.join(robot.parameter_names)}"
+            )
+        out[name] = _number(value, label, name) * (length if is_length(name) else angle)
+    return out
+
+
 def robot_to_toml(robot: Robot) -> str:
     """Write `robot` as a robot file (m, rad, full precision) that `load_robot` reads back."""
     lines = [f"name = {_q(robot.name)}"]
@@ -176,15 +239,26 @@ def robot_to_toml(robot: Robot) -> str:
     if robot.confidence:
         lines.append(f"confidence = {_q(robot.confidence)}")
     for j in robot.joints:
-        lines += ["", "[[joints]]", f"type = {_q(j.type)}", f"a = {j.a!r}",
-                  f"alpha = {j.alpha!r}", f"d = {j.d!r}", f"theta = {j.theta!r}"]  # fmt: skip
+        lines += [
+            "",
+            "[[joints]]",
+            f"type = {_q(j.type)}",
+            f"a = {j.a!r}",
+            f"alpha = {j.alpha!r}",
+            f"d = {j.d!r}",
+            f"theta = {j.theta!r}",
+        ]
         if j.beta is not None:
             lines.append(f"beta = {j.beta!r}")
         if j.limits is not None:
             lines.append(f"limits = [{j.limits[0]!r}, {j.limits[1]!r}]")
     for key, frame in (("base", robot.base), ("tool", robot.tool)):
-        lines += ["", f"[{key}]", f"xyz = [{', '.join(repr(float(v)) for v in frame.xyz)}]",
-                  f"rpy = [{', '.join(repr(float(v)) for v in frame.rpy)}]"]  # fmt: skip
+        lines += [
+            "",
+            f"[{key}]",
+            f"xyz = [{', '.join(repr(float(v)) for v in frame.xyz)}]",
+            f"rpy = [{', '.join(repr(float(v)) for v in frame.rpy)}]",
+        ]
     return "\n".join(lines) + "\n"
 
 

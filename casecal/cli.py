@@ -10,10 +10,92 @@ import logging
 import math
 import sys
 
-from . import __version__
-from .catalog import load_robot, robots
+import numpy as np
+
+from . import __version__, poses
+from .catalog import load_deviations, load_robot, robot_to_toml, robots
 from .errors import CalibrationError
+from .identifiability import observability
+from .identification import METHODS, identify
+from .measurement_files import read_csv, write_atomic, write_csv
+from .measurements import simulate
 from .parameters import unit
+
+_LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
+
+
+def parse_length(text: str) -> float:
+    """'0.01mm', '10um', '1e-5m' or a bare number (mm) to metres."""
+    t = text.strip().lower().replace("µm", "um")
+    for suffix in ("mm", "um", "m"):
+        if t.endswith(suffix):
+            number, scale = t[: -len(suffix)], _LENGTH_UNITS[suffix]
+            break
+    else:
+        number, scale = t, 1e-3
+    try:
+        value = float(number) * scale
+    except ValueError:
+        raise CalibrationError(
+            f"{text!r} is not a length; write e.g. 0.01mm, 10um or 1e-5m"
+        ) from None
+    if not math.isfinite(value) or value < 0:
+        raise CalibrationError(f"{text!r} must be a finite, non-negative length")
+    return value
+
+
+def _schedule(robot, args):
+    if args.poses < 1:
+        raise CalibrationError(f"--poses must be at least 1, got {args.poses}")
+    if args.schedule == "seed":
+        return poses.seed_schedule(robot, args.poses)
+    return poses.uniform(robot, args.poses, seed=args.seed)
+
+
+def _cmd_simulate(args: argparse.Namespace) -> None:
+    robot = load_robot(args.robot)
+    deviations = load_deviations(args.deviations, robot) if args.deviations else {}
+    true = robot.with_deviations(deviations)
+    q = _schedule(robot, args)
+    meas = simulate(true, q, noise=parse_length(args.noise), seed=args.seed)
+    write_csv(args.output, meas, robot)
+    shift = np.linalg.norm(meas.positions - robot.position(q), axis=1)
+    print(f"wrote {meas.n_poses} poses of {robot.name} ({args.schedule} schedule) to {args.output}")
+    print(
+        f"{len(deviations)} deviations, noise sigma {parse_length(args.noise) * 1e3:g} mm; "
+        f"measured minus nominal: RMS {np.sqrt(np.mean(shift**2)) * 1e3:.4f} mm, "
+        f"max {shift.max() * 1e3:.4f} mm"
+    )
+
+
+def _cmd_identify(args: argparse.Namespace) -> None:
+    robot = load_robot(args.robot)
+    meas = read_csv(args.measurements, robot)
+    noise = parse_length(args.noise) if args.noise is not None else None
+    truth = load_deviations(args.truth, robot) if args.truth else None
+    cal = identify(
+        robot,
+        meas,
+        args.parameters,
+        args.method,
+        noise=noise,
+        truth=truth,
+        max_iterations=args.max_iterations,
+    )
+    print(cal.summary())
+    if not cal.success:
+        raise CalibrationError(f"the fit did not converge ({cal.message}); nothing written")
+    if args.output:
+        write_atomic(args.output, robot_to_toml(cal.robot))
+        print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
+
+
+def _cmd_observability(args: argparse.Namespace) -> None:
+    robot = load_robot(args.robot)
+    q = _schedule(robot, args)
+    obs = observability(robot, q, args.parameters)
+    print(f"{robot.name}, {args.schedule} schedule, {args.poses} poses")
+    print(obs)
 
 
 def _cmd_robots(args: argparse.Namespace) -> None:
@@ -21,8 +103,9 @@ def _cmd_robots(args: argparse.Namespace) -> None:
     for name in robots():
         robot = load_robot(name)
         source = robot.source[0] if robot.source else ""
-        rows.append((name, str(robot.dof), robot.joint_types, robot.convention,
-                     robot.full_name, source))  # fmt: skip
+        rows.append(
+            (name, str(robot.dof), robot.joint_types, robot.convention, robot.full_name, source)
+        )
     header = ("name", "dof", "joints", "conv", "robot", "source (first of several)")
     widths = [max(len(r[k]) for r in [header, *rows]) for k in range(5)]
     for row in [header, *rows]:
@@ -42,8 +125,10 @@ def _cmd_show(args: argparse.Namespace) -> None:
     print(f"{robot.name}: {robot.full_name or robot.name}")
     print(f"{robot.dof} joints ({robot.joint_types}), {conv}; lengths in mm, angles in degrees")
     print()
-    print(f"{'joint':>5} {'type':>4} {'theta':>10} {'d':>10} {'a':>10} {'alpha':>10} "
-          f"{'beta':>10} {'q min':>10} {'q max':>10}")  # fmt: skip
+    print(
+        f"{'joint':>5} {'type':>4} {'theta':>10} {'d':>10} {'a':>10} {'alpha':>10} "
+        f"{'beta':>10} {'q min':>10} {'q max':>10}"
+    )
     for i, j in enumerate(robot.joints, start=1):
         beta = _fmt(j.beta * deg) if j.beta is not None else f"{'-':>10}"
         if j.limits is None:
@@ -52,8 +137,10 @@ def _cmd_show(args: argparse.Namespace) -> None:
             scale = deg if j.type == "R" else mm
             lim = f"{_fmt(j.limits[0] * scale)} {_fmt(j.limits[1] * scale)}"
         q_unit = "" if j.type == "R" else "  (q min/max in mm)"
-        print(f"{i:>5} {j.type:>4} {_fmt(j.theta * deg)} {_fmt(j.d * mm)} {_fmt(j.a * mm)} "
-              f"{_fmt(j.alpha * deg)} {beta} {lim}{q_unit}")  # fmt: skip
+        print(
+            f"{i:>5} {j.type:>4} {_fmt(j.theta * deg)} {_fmt(j.d * mm)} {_fmt(j.a * mm)} "
+            f"{_fmt(j.alpha * deg)} {beta} {lim}{q_unit}"
+        )
     for label, frame in (("base", robot.base), ("tool", robot.tool)):
         xyz = ", ".join(f"{v * mm:.4f}" for v in frame.xyz)
         rpy = ", ".join(f"{v * deg:.4f}" for v in frame.rpy)
@@ -85,13 +172,21 @@ def build_parser() -> argparse.ArgumentParser:
         "Lengths print in mm, angles in degrees.",
     )
     parser.add_argument("--version", action="version", version=f"casecal {__version__}")
-    parser.add_argument("-v", "--verbose", action="count", default=0,
-                        help="log what the library does (-vv for debug detail)")  # fmt: skip
+    parser.add_argument(
+        "-v",
+        "--verbose",
+        action="count",
+        default=0,
+        help="log what the library does (-vv for debug detail)",
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    p = sub.add_parser("robots", help="list the robot catalog (name, dof, joint types, source)",
-                       description="List the robots in casecal's catalog.")  # fmt: skip
+    p = sub.add_parser(
+        "robots",
+        help="list the robot catalog (name, dof, joint types, source)",
+        description="List the robots in casecal's catalog.",
+    )
     p.add_argument("--wide", action="store_true", help="do not shorten the source column")
     p.set_defaults(func=_cmd_robots)
 
@@ -103,6 +198,101 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("robot", metavar="NAME|FILE", help="catalog name (e.g. scorbot) or .toml path")
     p.set_defaults(func=_cmd_show)
+
+    def add_schedule(p, default_poses):
+        p.add_argument(
+            "--poses",
+            type=int,
+            default=default_poses,
+            help=f"number of poses (default {default_poses})",
+        )
+        p.add_argument(
+            "--schedule",
+            choices=("seed", "uniform"),
+            default="seed",
+            help="seed: the paper's (all joints 0, 1, 2, ... degrees together); "
+            "uniform: random inside the joint limits (default seed)",
+        )
+        p.add_argument(
+            "--seed",
+            type=int,
+            default=0,
+            help="random seed for uniform poses and noise (default 0)",
+        )
+
+    params_help = (
+        "parameters: names, families or 'all', comma-separated, e.g. "
+        "'theta*,a*,d*' (default: the paper's theta, a, d; 'a*' never means alpha)"
+    )
+    p = sub.add_parser(
+        "simulate",
+        help="simulate position measurements of a robot with deviations",
+        description="Simulate measured tool-point positions of a robot whose parameters "
+        "deviate from nominal, and write them as CSV (joints in deg/mm, positions in mm).",
+    )
+    p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path (the nominal robot)")
+    add_schedule(p, 100)
+    p.add_argument(
+        "--deviations",
+        metavar="FILE",
+        help="TOML of deviations: length_unit, angle_unit and name = value lines "
+        '(e.g. theta1 = 0.01 with angle_unit = "deg")',
+    )
+    p.add_argument(
+        "--noise",
+        default="0mm",
+        help="Gaussian noise sigma per coordinate, e.g. 0.01mm or 10um "
+        "(bare numbers are mm; default 0)",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="CSV", help="measurement file to write")
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser(
+        "identify",
+        help="identify parameter deviations from a measurement CSV",
+        description="Identify the parameter deviations of ROBOT from measured positions, print "
+        "a summary (mm, degrees) with standard errors and what the data cannot see, and "
+        "optionally write the calibrated robot as TOML.",
+    )
+    p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path (nominal robot)")
+    p.add_argument(
+        "measurements",
+        metavar="CSV",
+        help="one row per pose: q1..qn (or q1_deg, q3_mm), x, y, z (or x_mm...)",
+    )
+    p.add_argument(
+        "--method",
+        choices=METHODS,
+        default="svd",
+        help="svd: the paper's one-shot step; gauss-newton, lm: iterated; "
+        "ipopt: CasADi NLP (default svd)",
+    )
+    p.add_argument("--parameters", default=None, help=params_help)
+    p.add_argument(
+        "--noise",
+        default=None,
+        help="measurement sigma to weight with, e.g. 0.02mm (default: the file's "
+        "sigma column, else unweighted)",
+    )
+    p.add_argument(
+        "--truth",
+        metavar="FILE",
+        help="TOML of the true deviations (simulations): adds error columns",
+    )
+    p.add_argument("--max-iterations", type=int, default=100, help="for iterated methods")
+    p.add_argument("-o", "--output", metavar="TOML", help="write the calibrated robot here")
+    p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser(
+        "observability",
+        help="what a pose set can identify, and what it cannot",
+        description="Rank, identifiable and unidentifiable parameters, blind combinations in "
+        "words, and observability indices O1-O5 of a pose schedule.",
+    )
+    p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path")
+    add_schedule(p, 100)
+    p.add_argument("--parameters", default=None, help=params_help)
+    p.set_defaults(func=_cmd_observability)
     return parser
 
 

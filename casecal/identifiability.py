@@ -112,7 +112,7 @@ class Observability:
         return "\n".join(lines)
 
 
-def observability(robot: Robot, q, parameters=DEFAULT_PARAMETERS, measurement="position"):
+def observability(robot: Robot, q, parameters=None, measurement="position"):
     """Which parameters a set of poses can identify, and which combinations it cannot.
 
     Parameters
@@ -122,7 +122,7 @@ def observability(robot: Robot, q, parameters=DEFAULT_PARAMETERS, measurement="p
     q : array-like, shape (N, dof)
         Poses, rad (R) or m (P).
     parameters : str or list of str
-        Names, families or ``"all"`` (see `casecal.parameters.select`). Default: the
+        Names, families or ``"all"`` (see `casecal.parameters.select`). Default None: the
         paper's set θ, a, d.
     measurement : {"position"}
         What is measured at each pose.
@@ -134,7 +134,7 @@ def observability(robot: Robot, q, parameters=DEFAULT_PARAMETERS, measurement="p
     if measurement != "position":
         raise CalibrationError(f"measurement {measurement!r} is not supported; use 'position'")
     q2, _ = check_joint_values(q, robot.dof)
-    J, names = robot.position_jacobian(q2, parameters)
+    J, names = robot.position_jacobian(q2, selection(robot, parameters))
     return analyse(J.reshape(-1, len(names)), names, n_poses=q2.shape[0])
 
 
@@ -146,11 +146,11 @@ def analyse(J: np.ndarray, names, n_poses: int, tolerance: float = RANK_TOLERANC
     zero = norms <= tolerance * max(norms.max(initial=0.0), np.finfo(float).tiny)
     Js = np.zeros_like(J)
     Js[:, ~zero] = J[:, ~zero] / norms[~zero]
-    s = np.linalg.svd(Js, compute_uv=False) if k else np.zeros(0)
+    s, null = _svd_null(Js[:, ~zero], tolerance)  # null: (k_nonzero, r)
+    s = np.concatenate([s, np.zeros(k - s.size)])  # zero columns add zero singular values
     s_max = s[0] if s.size else 0.0
     rank = int(np.sum(s > tolerance * s_max)) if s_max > 0 else 0
 
-    null = _null_space(Js[:, ~zero], tolerance)  # (k_nonzero, r)
     live = [n for n, z in zip(names, zero, strict=True) if not z]
     blind_rows = _rref(null.T, 1e-9) if null.size else np.zeros((0, len(live)))
     spots = [_zero_column_spot(n) for n, z in zip(names, zero, strict=True) if z]
@@ -186,14 +186,17 @@ def indices(Js: np.ndarray, n_poses: int) -> dict:
     }
 
 
-def _null_space(Js: np.ndarray, tolerance: float) -> np.ndarray:
-    if Js.shape[1] == 0:
-        return np.zeros((0, 0))
-    _, s, Vt = np.linalg.svd(Js, full_matrices=True)
-    s_full = np.zeros(Js.shape[1])
+def _svd_null(Js: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Singular values and a null-space basis (columns) of `Js`, from one thin SVD."""
+    m, n = Js.shape
+    if n == 0:
+        return np.zeros(0), np.zeros((0, 0))
+    # a thin SVD gives all n right singular vectors when m >= n; else ask for all of them
+    _, s, Vt = np.linalg.svd(Js, full_matrices=m < n)
+    s_full = np.zeros(n)
     s_full[: s.size] = s
-    blind = s_full <= tolerance * s_full[0] if s_full[0] > 0 else np.ones_like(s_full, bool)
-    return Vt[blind].T
+    blind = s_full <= tolerance * s_full[0] if s_full[0] > 0 else np.ones(n, bool)
+    return s, Vt[blind].T
 
 
 def _rref(A: np.ndarray, tol: float) -> np.ndarray:
@@ -253,11 +256,13 @@ def _group_spots(rows: np.ndarray, names: list[str], J: np.ndarray) -> list[Blin
             ref = J[:, idx[0]]
             coeffs = J[:, idx].T @ ref / (ref @ ref)
             visible = _expression(coeffs, members)
-            text = (f"{', '.join(members)}: only {visible} is identifiable, "
-                    "not the parameters alone (their columns are parallel)")  # fmt: skip
+            text = (
+                f"{', '.join(members)}: only {visible} is identifiable, "
+                "not the parameters alone (their columns are parallel)"
+            )
         else:
-            text = (f"{', '.join(members)}: {len(g_rows)} combinations are blind: "
-                    + "; ".join(blind))  # fmt: skip
+            what = "1 combination is" if len(g_rows) == 1 else f"{len(g_rows)} combinations are"
+            text = f"{', '.join(members)}: {what} blind: " + "; ".join(blind)
         spots.append(BlindSpot(members, blind, visible, text))
     return spots
 

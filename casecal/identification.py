@@ -119,7 +119,7 @@ def identify(
         ``"ipopt"`` only: lower and upper bound on the deviation of named parameters, SI.
     prior : dict of str to float, optional
         ``"ipopt"`` only: standard deviation (SI) of a Gaussian prior centred on the nominal
-        value, per named parameter (regularisation toward nominal).
+        value, per named parameter (regularisation toward nominal). Needs a measurement σ.
     max_iterations : int
         Iteration limit of the iterated methods. Default 100.
     tolerance : float
@@ -154,20 +154,30 @@ def identify(
     if not known and np.any(sigma > 0):
         raise CalibrationError("noise sigma is zero for some coordinates and not others")
     w = 1.0 / sigma if known else np.ones_like(y)
+    if prior and not known:
+        raise CalibrationError(
+            "a prior needs the measurement sigma to weigh against; give noise=... (m) or "
+            "measurements with sigma"
+        )
 
     full = Problem(robot, q, y, w, names)
     obs = analyse(full.jacobian(np.zeros(len(names))), names, n_poses=q.shape[0])
     estimated = obs.base_parameters
-    if 3 * q.shape[0] < len(estimated):
+    if obs.rank >= 3 * q.shape[0] and len(names) > obs.rank:
+        # the data, not the robot's structure, limit what can be seen
         raise CalibrationError(
             f"{q.shape[0]} poses give {3 * q.shape[0]} coordinates, fewer than the "
-            f"{len(estimated)} parameters to estimate; measure at least "
-            f"{-(-len(estimated) // 3)} poses"
+            f"{len(names)} parameters asked for, so they cannot tell which are blind; "
+            f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
         )
     problem = Problem(robot, q, y, w, estimated)
     x0 = np.zeros(len(estimated))
-    solver = {"svd": _svd, "gauss-newton": _gauss_newton, "lm": _levenberg_marquardt,
-              "ipopt": _ipopt}[method]  # fmt: skip
+    solver = {
+        "svd": _svd,
+        "gauss-newton": _gauss_newton,
+        "lm": _levenberg_marquardt,
+        "ipopt": _ipopt,
+    }[method]
     kwargs = {"max_iterations": max_iterations, "tolerance": tolerance}
     if method == "ipopt":
         kwargs.update(bounds=bounds or {}, prior=prior or {})
@@ -267,6 +277,7 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, **_):
                 break
             t *= 0.5
         if cost_new >= cost:
+            history.append(cost)
             return x, it, 3, history, None
         norms = np.linalg.norm(J, axis=0)
         small = np.linalg.norm(t * step * norms) <= tolerance * (
@@ -316,6 +327,7 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, **_):
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
         else:
+            history.append(cost)
             if small:  # even a tiny step does not lower the cost: rounding floor
                 return x, it, 3, history, None
             mu *= nu
@@ -356,17 +368,24 @@ def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior):
     Jz = Jt / ca.repmat(ca.DM(norms), 1, 3 * n)
     lam_f = ca.MX.sym("lam_f")
     H = lam_f * (Jz @ Jz.T + ca.diag(prior_w**2)) / scale
-    hess = ca.Function("nlp_hess_l", [z, ca.MX.sym("p", 0), lam_f, ca.MX.sym("lam_g", 0)],
-                       [ca.triu(H)])  # fmt: skip
-    solver = ca.nlpsol("casecal_ipopt", "ipopt", {"x": z, "f": cost / scale}, {
-        "hess_lag": hess,
-        "print_time": False,
-        "ipopt.print_level": 0,
-        "ipopt.sb": "yes",
-        "ipopt.max_iter": max_iterations,
-        "ipopt.tol": 1e-10,  # the scaled gradient's rounding floor is ~1e-11
-        "ipopt.acceptable_iter": 0,
-    })  # fmt: skip
+    hess = ca.Function(
+        "nlp_hess_l", [z, ca.MX.sym("p", 0), lam_f, ca.MX.sym("lam_g", 0)], [ca.triu(H)]
+    )
+    solver = ca.nlpsol(
+        "casecal_ipopt",
+        "ipopt",
+        {"x": z, "f": cost / scale},
+        {
+            "hess_lag": hess,
+            "print_time": False,
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "ipopt.max_iter": max_iterations,
+            "ipopt.tol": 1e-10,  # the scaled gradient's rounding floor is ~1e-11
+            "ipopt.acceptable_iter": 0,
+            "ipopt.bound_relax_factor": 0.0,  # bounds the user gave hold exactly
+        },
+    )
     lb = np.full(k, -np.inf)
     ub = np.full(k, np.inf)
     for name, (lo, hi) in bounds.items():
@@ -375,8 +394,10 @@ def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior):
     sol = solver(x0=x0 * norms, lbx=lb, ubx=ub)
     stats = solver.stats()
     x_opt = np.array(sol["x"]).ravel() / norms
-    r = problem.residual(x_opt)
-    history = [0.5 * r0 @ r0, 0.5 * r @ r]
+    history = [scale * f for f in stats.get("iterations", {}).get("obj", [])]
+    if not history:
+        r = problem.residual(x_opt)
+        history = [0.5 * r0 @ r0, 0.5 * r @ r]
     ok = stats.get("success", False)
     status = 5 if ok else -1
     message = None if ok else f"failed: IPOPT returned {stats.get('return_status')}"

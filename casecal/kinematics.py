@@ -167,9 +167,15 @@ class Chain:
         T = frame("base")
         for i, jt in enumerate(structure.joint_types, start=1):
             T = T @ link_transform(
-                structure.convention, jt, self.q[i - 1], P[f"theta{i}"], P[f"d{i}"],
-                P[f"a{i}"], trig[f"alpha{i}"], trig.get(f"beta{i}"),
-            )  # fmt: skip
+                structure.convention,
+                jt,
+                self.q[i - 1],
+                P[f"theta{i}"],
+                P[f"d{i}"],
+                P[f"a{i}"],
+                trig[f"alpha{i}"],
+                trig.get(f"beta{i}"),
+            )
         self.T = T @ frame("tool")
         self._evaluators: dict = {}
 
@@ -238,8 +244,9 @@ class Chain:
     def function(self, kind: str, columns: tuple[int, ...] = ()) -> ca.Function:
         """A CasADi Function ``(q, p) -> out`` for one pose, dense output, CSE applied."""
         out = ca.densify(self.expression(kind, columns))
-        f = ca.Function(f"casecal_{kind}", [self.q, self.pext], [out], ["q", "p"], ["out"],
-                        {"cse": True})  # fmt: skip
+        f = ca.Function(
+            f"casecal_{kind}", [self.q, self.pext], [out], ["q", "p"], ["out"], {"cse": True}
+        )
         if f.has_free():
             raise RuntimeError(f"internal error: {kind} graph has free symbols")
         return f

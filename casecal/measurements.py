@@ -20,9 +20,10 @@ class Measurements:
         Joint values, rad (R) or m (P).
     positions : ndarray, shape (N, 3)
         Measured tool-point positions in the world frame, m.
-    sigma : ndarray, shape (3,)
-        Standard deviation of the measurement noise per axis (x, y, z), m. Zero means
-        noise-free (simulated) data.
+    sigma : ndarray, shape (N, 3)
+        Standard deviation of the measurement noise of each coordinate, m; a scalar or
+        (3,) per-axis value given to the constructor is broadcast. Zero means noise-free
+        (simulated) data or unknown noise.
     kind : str
         ``"position"``.
     """
@@ -42,9 +43,18 @@ class Measurements:
             )
         if not np.all(np.isfinite(y)):
             raise CalibrationError("measured positions contain NaN or inf; remove those rows")
-        sigma = np.broadcast_to(np.asarray(self.sigma, dtype=float), (3,)).copy()
+        sigma = np.asarray(self.sigma, dtype=float)
+        if sigma.ndim == 1 and sigma.size == q.shape[0] and sigma.size != 3:
+            sigma = sigma[:, None]  # one isotropic sigma per pose
+        try:
+            sigma = np.broadcast_to(sigma, (q.shape[0], 3)).copy()
+        except ValueError:
+            raise CalibrationError(
+                f"noise sigma of shape {sigma.shape} does not fit {q.shape[0]} poses; give a "
+                "scalar, 3 values (x, y, z), one per pose, or (N, 3), in m"
+            ) from None
         if np.any(sigma < 0) or not np.all(np.isfinite(sigma)):
-            raise CalibrationError(f"noise sigma {sigma} must be finite and non-negative (m)")
+            raise CalibrationError("noise sigma must be finite and non-negative (m)")
         for name, value in (("q", q), ("positions", y), ("sigma", sigma)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -81,4 +91,4 @@ def simulate(true_robot: Robot, q, noise=0.0, seed=None) -> Measurements:
     positions = true_robot.position(q2)
     if np.any(sigma > 0):
         positions = positions + np.random.default_rng(seed).normal(size=positions.shape) * sigma
-    return Measurements(q=q2, positions=positions, sigma=sigma.copy())
+    return Measurements(q=q2, positions=positions, sigma=sigma)

@@ -202,10 +202,16 @@ class Robot:
         joints = []
         for i, j in enumerate(self.joints, start=1):
             beta = p[f"beta{i}"] if j.beta is not None else None
-            joints.append(dataclasses.replace(
-                j, theta=p[f"theta{i}"], d=p[f"d{i}"], a=p[f"a{i}"], alpha=p[f"alpha{i}"],
-                beta=beta,
-            ))  # fmt: skip
+            joints.append(
+                dataclasses.replace(
+                    j,
+                    theta=p[f"theta{i}"],
+                    d=p[f"d{i}"],
+                    a=p[f"a{i}"],
+                    alpha=p[f"alpha{i}"],
+                    beta=beta,
+                )
+            )
 
         def frame(prefix: str) -> Frame:
             v = [p[f"{prefix}_{axis}"] for axis in FRAME_AXES]

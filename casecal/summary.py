@@ -27,25 +27,35 @@ def _fmt(value, digits: int = 5) -> str:
 def format_table(df: pd.DataFrame) -> str:
     """Fixed-width text of a parameter table (numbers to 5 decimals, mm and degrees)."""
     cols = [c for c in df.columns if c != "status"]
-    cells = [[str(c) for c in cols]]
+    cells = [[str(c) for c in cols] + ["note"]]
     for _, row in df.iterrows():
         cells.append(
             [
                 row[c] if c in ("parameter", "unit") else _fmt(row[c], 4 if c == "error_pct" else 5)
                 for c in cols
             ]
+            + [_short_status(row.get("status", ""))]
         )
+    cols = [*cols, "note"]
     widths = [max(len(r[i]) for r in cells) for i in range(len(cols))]
     lines = []
     for k, r in enumerate(cells):
         line = "  ".join(
-            c.ljust(w) if i < 2 else c.rjust(w)
+            c.ljust(w) if i < 2 or i == len(r) - 1 else c.rjust(w)
             for i, (c, w) in enumerate(zip(r, widths, strict=True))
         )
-        lines.append(line)
+        lines.append(line.rstrip())
         if k == 0:
             lines.append("-" * len(line))
     return "\n".join(lines)
+
+
+def _short_status(status: str) -> str:
+    if status.startswith("held"):
+        return "held at nominal"
+    if status.startswith("stands for"):
+        return "= " + status.removeprefix("stands for ")
+    return "" if status == "identified" else status
 
 
 def build_summary(cal: Calibration) -> Summary:
@@ -82,8 +92,9 @@ def build_summary(cal: Calibration) -> Summary:
         if s.size
         else "  no parameters",
     ]
-    return Summary(header=header, table=cal.table, diagnostics="\n".join(diag),
-                   notes=tuple(_notes(cal)))  # fmt: skip
+    return Summary(
+        header=header, table=cal.table, diagnostics="\n".join(diag), notes=tuple(_notes(cal))
+    )
 
 
 def _notes(cal: Calibration) -> list[str]:

@@ -83,7 +83,7 @@ def test_simulate_noise_free_and_noisy():
     # sample std of 12000 draws: within 3 % of sigma (its own std is ~0.65 %)
     assert np.std(err) == pytest.approx(sigma, rel=0.03)
     assert abs(np.mean(err)) < 5 * sigma / np.sqrt(err.size)
-    np.testing.assert_array_equal(noisy.sigma, [sigma] * 3)
+    np.testing.assert_array_equal(noisy.sigma, np.full((4000, 3), sigma))
     again = cc.simulate(true, q, noise=sigma, seed=3)
     np.testing.assert_array_equal(again.positions, noisy.positions)
     with pytest.raises(cc.CalibrationError, match="non-negative"):

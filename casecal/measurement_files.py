@@ -1,0 +1,183 @@
+"""Measurement CSV files: `read_csv` and `write_csv`, with units in the column names.
+
+One row per pose. Columns (any order; extra columns are kept out of the way and ignored):
+
+- joints ``q1`` … ``qn`` in rad (revolute) or m (prismatic), or with the unit in the
+  name: ``q1_deg``, ``q1_rad``, ``q3_mm``, ``q3_m``;
+- measured position ``x, y, z`` in m, or ``x_mm, y_mm, z_mm``;
+- optional noise σ: ``sigma`` (m) or ``sigma_mm``, one isotropic value per row, or per
+  axis ``sigma_x_mm`` … ``sigma_z_mm``.
+
+Every mistake raises `CalibrationError` naming the file, the row or column, and the fix.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .errors import CalibrationError
+from .measurements import Measurements
+from .robot import Robot
+
+_SCALE = {"": 1.0, "m": 1.0, "mm": 1e-3, "um": 1e-6, "rad": 1.0, "deg": math.pi / 180.0}
+_JOINT = re.compile(r"^q(\d+)(?:_(deg|rad|mm|m))?$")
+
+
+def read_csv(path, robot: Robot) -> Measurements:
+    """Read measurements of `robot` from a CSV file (format in the module doc).
+
+    Parameters
+    ----------
+    path : str or path
+    robot : Robot
+        The robot the data come from (its joint count and types decide the columns).
+
+    Returns
+    -------
+    Measurements
+        SI units.
+    """
+    label = str(path)
+    if not Path(path).is_file():
+        raise CalibrationError(f"measurement file {label!r} does not exist; check the path")
+    try:
+        df = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except pd.errors.EmptyDataError:
+        raise CalibrationError(
+            f"{label}: the file is empty; it needs a header and one row per pose"
+        ) from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise CalibrationError(f"{label}: not a readable CSV file ({exc})") from None
+    columns = [str(c).strip() for c in df.columns]
+    duplicated = sorted({c for c in columns if columns.count(c) > 1} | _mangled(columns))
+    if duplicated:
+        raise CalibrationError(f"{label}: column {duplicated[0]!r} appears twice; keep one")
+    df.columns = columns
+    if df.empty:
+        raise CalibrationError(f"{label}: the header has no rows below it; add one row per pose")
+
+    q = np.empty((len(df), robot.dof))
+    for i, joint in enumerate(robot.joints, start=1):
+        name, scale = _pick(df, label, [f"q{i}"], joint)
+        q[:, i - 1] = _numbers(df, name, label) * scale
+    extra = [c for c in columns if (m := _JOINT.match(c)) and int(m.group(1)) > robot.dof]
+    if extra:
+        raise CalibrationError(
+            f"{label}: column {extra[0]!r} but robot {robot.name!r} has {robot.dof} joints; "
+            "use the robot the data came from"
+        )
+    y = np.empty((len(df), 3))
+    for k, axis in enumerate("xyz"):
+        name, scale = _pick(df, label, [axis], None)
+        y[:, k] = _numbers(df, name, label) * scale
+    sigma = np.zeros((len(df), 3))
+    if any(c in df for c in ("sigma", "sigma_mm")):
+        name, scale = _pick(df, label, ["sigma"], None)
+        sigma[:] = (_numbers(df, name, label) * scale)[:, None]
+    elif any(c.startswith("sigma_") for c in columns):
+        for k, axis in enumerate("xyz"):
+            name, scale = _pick(df, label, [f"sigma_{axis}"], None)
+            sigma[:, k] = _numbers(df, name, label) * scale
+    if np.any(sigma < 0):
+        row = int(np.argwhere(sigma < 0)[0][0])
+        raise CalibrationError(f"{label}: row {row + 2}: sigma is negative; it must be >= 0")
+    return Measurements(q=q, positions=y, sigma=sigma)
+
+
+def write_csv(path, measurements: Measurements, robot: Robot) -> None:
+    """Write `measurements` as CSV in degrees and millimetres, atomically.
+
+    Numbers are written with 17 significant digits, so reading back loses nothing but the
+    rounding of the mm/deg conversion (~1e-16 relative).
+    """
+    data = {}
+    for i, joint in enumerate(robot.joints, start=1):
+        col = measurements.q[:, i - 1]
+        if joint.type == "R":
+            data[f"q{i}_deg"] = np.rad2deg(col)
+        else:
+            data[f"q{i}_mm"] = col * 1e3
+    for k, axis in enumerate("xyz"):
+        data[f"{axis}_mm"] = measurements.positions[:, k] * 1e3
+    sigma = measurements.sigma
+    if np.any(sigma > 0):
+        if np.all(sigma == sigma[:, :1]):
+            data["sigma_mm"] = sigma[:, 0] * 1e3
+        else:
+            for k, axis in enumerate("xyz"):
+                data[f"sigma_{axis}_mm"] = sigma[:, k] * 1e3
+    text = pd.DataFrame(data).to_csv(index=False, float_format="%.17g", lineterminator="\n")
+    write_atomic(path, text)
+
+
+def write_atomic(path, text: str) -> None:
+    """Write `text` to `path` through a temporary file and a rename: never half a file."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or Path("."))
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _mangled(columns) -> set[str]:
+    # pandas renames a repeated header 'x' to 'x.1'
+    return {
+        c.rsplit(".", 1)[0]
+        for c in columns
+        if re.search(r"\.\d+$", c) and c.rsplit(".", 1)[0] in columns
+    }
+
+
+def _pick(df: pd.DataFrame, label: str, bases, joint) -> tuple[str, float]:
+    """The one column holding `bases[0]` in some unit, and its scale to SI."""
+    base = bases[0]
+    units = ["", "rad", "deg"] if joint is not None and joint.type == "R" else ["", "m", "mm"]
+    found = [
+        (f"{base}_{u}" if u else base, u) for u in units if (f"{base}_{u}" if u else base) in df
+    ]
+    wrong = [
+        c
+        for c in df.columns
+        if re.fullmatch(rf"{re.escape(base)}_(deg|rad|mm|m|um)", c)
+        and (c, c.rsplit("_", 1)[1]) not in found
+    ]
+    if wrong and not found:
+        kind = (
+            "revolute (use _deg or _rad)"
+            if joint and joint.type == "R"
+            else "a length (use _mm or _m)"
+        )
+        raise CalibrationError(f"{label}: column {wrong[0]!r} has the wrong unit: {base} is {kind}")
+    if not found:
+        options = ", ".join(f"{base}_{u}" if u else base for u in units)
+        raise CalibrationError(f"{label}: missing column for {base}; add one of: {options}")
+    if len(found) > 1:
+        raise CalibrationError(
+            f"{label}: columns {found[0][0]!r} and {found[1][0]!r} both give {base}; "
+            "keep one so the unit is unambiguous"
+        )
+    name, u = found[0]
+    return name, _SCALE[u]
+
+
+def _numbers(df: pd.DataFrame, column: str, label: str) -> np.ndarray:
+    values = pd.to_numeric(df[column].str.strip(), errors="coerce").to_numpy(dtype=float)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise CalibrationError(
+            f"{label}: row {row + 2}, column {column!r}: {df[column].iloc[row]!r} is not a "
+            "finite number; fix or remove that row"
+        )
+    return values
