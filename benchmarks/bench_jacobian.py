@@ -20,11 +20,12 @@ import numpy as np
 
 
 def numpy_dh_position_jacobian(theta, d, a, alpha, q):
-    """Standard-DH position Jacobian w.r.t. (theta, d, a, alpha) per joint, all revolute.
+    """Standard-DH tool positions and position Jacobian w.r.t. (theta, d, a, alpha) per joint.
 
-    Columns per joint i, with z_{i-1}, o_{i-1} of frame i-1, x_i, o_i of frame i and tool
-    point p: dtheta = z_{i-1} x (p - o_{i-1}), dd = z_{i-1}, da = x_i, dalpha = x_i x (p - o_i).
-    Returns (N, 3, 4n) in the order theta1, d1, a1, alpha1, theta2, ...
+    All revolute. Columns per joint i, with z_{i-1}, o_{i-1} of frame i-1, x_i, o_i of frame
+    i and tool point p: dtheta = z_{i-1} x (p - o_{i-1}), dd = z_{i-1}, da = x_i,
+    dalpha = x_i x (p - o_i). Returns p (N, 3) and J (N, 3, 4n), columns in the order
+    theta1, d1, a1, alpha1, theta2, ...
     """
     n_poses, n = q.shape
     T = np.broadcast_to(np.eye(4), (n_poses, 4, 4)).copy()
@@ -45,7 +46,7 @@ def numpy_dh_position_jacobian(theta, d, a, alpha, q):
         z_prev, o_prev = frames[i][:, :3, 2], frames[i][:, :3, 3]
         x_i, o_i = frames[i + 1][:, :3, 0], frames[i + 1][:, :3, 3]
         cols += [np.cross(z_prev, p - o_prev), z_prev, x_i, np.cross(x_i, p - o_i)]
-    return np.stack(cols, axis=2)
+    return p, np.stack(cols, axis=2)
 
 
 def best_time(fn, repeat):
@@ -79,7 +80,7 @@ def main():
     d = np.array([j.d for j in joints])
     a = np.array([j.a for j in joints])
     alpha = np.array([j.alpha for j in joints])
-    J_np = numpy_dh_position_jacobian(theta, d, a, alpha, q)
+    _, J_np = numpy_dh_position_jacobian(theta, d, a, alpha, q)
     order = [f"{f}{i}" for i in range(1, 7) for f in ("theta", "d", "a", "alpha")]
     J_np = J_np[:, :, [order.index(n) for n in names]]
     agree = float(np.abs(J - J_np).max())

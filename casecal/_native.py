@@ -3,10 +3,11 @@
 CasADi's own batched call converts every input and output through its DM type, which costs
 more than the arithmetic. Here the generated C of the one-pose Function gets a small driver
 that loops over the poses in C, and numpy buffers are handed over as pointers, so a batch
-costs one Python call. The shared library is cached by a hash of its source (which includes
-CasADi's version) in ``$CASECAL_CACHE`` or ``~/.cache/casecal``, so a structure is compiled
-once per machine. Any failure (no compiler, read-only cache, compile error) falls back to
-CasADi's own evaluation, logged but never raised.
+costs one Python call. The shared library is cached in ``$CASECAL_CACHE`` or
+``~/.cache/casecal`` under a hash of its key (robot structure, output, parameter columns)
+and of the code that generates it, so a structure is compiled once per machine and a warm
+process loads it without building any CasADi graph. Any failure (no compiler, read-only
+cache, compile error) falls back to CasADi's own evaluation, logged but never raised.
 """
 
 from __future__ import annotations
@@ -77,28 +78,52 @@ def source(function: ca.Function) -> str:
     )
 
 
-def compile_function(function: ca.Function):
-    """A batch callable ``(q (N, n_q), p, out) -> None`` in C, or None if it cannot be built."""
-    cc = compiler()
-    if cc is None:
-        log.info("no C compiler found; using CasADi's own evaluation")
-        return None
+def fingerprint() -> str:
+    """Hash of everything a kernel depends on besides its key: the code that generates it,
+    CasADi's version and the compiler flags. Any change gives new cache entries."""
+    global _FINGERPRINT
+    if _FINGERPRINT is None:
+        here = Path(__file__).parent
+        text = "".join((here / f).read_text() for f in ("kinematics.py", "_native.py"))
+        text += ca.__version__ + " ".join(CFLAGS)
+        _FINGERPRINT = hashlib.sha256(text.encode()).hexdigest()
+    return _FINGERPRINT
+
+
+_FINGERPRINT: str | None = None
+
+
+def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
+    """A batch callable ``(q (N, n_q), p (n_p,), out) -> None`` in C, or None.
+
+    Parameters
+    ----------
+    key : hashable
+        Identifies the kernel (robot structure, output kind, parameter columns); with
+        `fingerprint` it names the cached library, so a warm cache needs no CasADi graph.
+    build_function : callable
+        Returns the one-pose CasADi Function; called only when the library must be built.
+    n_q, n_p, n_out : int
+        Input and per-pose output sizes, checked on every call.
+    """
+    digest = hashlib.sha256((fingerprint() + repr(key)).encode()).hexdigest()[:24]
+    lib_path = cache_dir() / f"casecal_{digest}.so"
     try:
-        src = source(function)
-        digest = hashlib.sha256((src + " ".join(CFLAGS)).encode()).hexdigest()[:20]
-        lib_path = cache_dir() / f"{function.name()}_{digest}.so"
         if not lib_path.exists():
-            _build(cc, src, lib_path)
+            cc = compiler()
+            if cc is None:
+                log.info("no C compiler found; using CasADi's own evaluation")
+                return None
+            _build(cc, source(build_function()), lib_path)
         lib = ctypes.CDLL(str(lib_path))
     except (OSError, subprocess.CalledProcessError) as exc:
         log.warning(
-            "could not compile %s (%s); using CasADi's own evaluation", function.name(), exc
+            "could not compile a kernel for %s (%s); using CasADi's own evaluation", key, exc
         )
         return None
     batch = lib.casecal_batch
     batch.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
     batch.restype = ctypes.c_int
-    n_q, n_p, n_out = function.nnz_in(0), function.nnz_in(1), function.nnz_out(0)
 
     def call(q: np.ndarray, p: np.ndarray, out: np.ndarray) -> None:
         q = np.ascontiguousarray(q, dtype=float)
@@ -109,7 +134,7 @@ def compile_function(function: ca.Function):
             raise ValueError("internal error: output buffer must be C-contiguous")
         status = batch(q.ctypes.data, p.ctypes.data, out.ctypes.data, q.shape[0])
         if status:
-            raise RuntimeError(f"compiled {function.name()} returned status {status}")
+            raise RuntimeError(f"compiled kernel {key} returned status {status}")
 
     return call
 

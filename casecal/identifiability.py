@@ -142,6 +142,10 @@ def analyse(J: np.ndarray, names, n_poses: int, tolerance: float = RANK_TOLERANC
     """`observability` for a stacked Jacobian (rows: measurements, columns: `names`)."""
     names = tuple(names)
     k = len(names)
+    if J.shape[0] > k:
+        # R of J = QR has the same column inner products (JᵀJ = RᵀR): every test below
+        # (norms, SVD, null space, Gram-Schmidt, coefficients) gives the same on R, faster
+        J = np.linalg.qr(J, mode="r")
     norms = np.linalg.norm(J, axis=0)
     zero = norms <= tolerance * max(norms.max(initial=0.0), np.finfo(float).tiny)
     Js = np.zeros_like(J)

@@ -23,7 +23,7 @@ from .errors import CalibrationError
 from .identifiability import analyse, selection
 from .measurements import Measurements
 from .robot import Robot
-from .solvers import SOLVERS, Problem, nr_threshold
+from .solvers import SOLVERS, Problem, nr_threshold, triangular
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +121,7 @@ def identify(
             f"{len(names)} parameters asked for, so they cannot tell which are blind; "
             f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
         )
-    problem = Problem(robot, q, y, w, estimated)
+    problem = full.restricted(estimated)
     x0 = np.zeros(len(estimated))
     solver = SOLVERS[method]
     kwargs = {"max_iterations": max_iterations, "tolerance": tolerance}
@@ -147,7 +147,7 @@ def identify(
         standard_errors=se,
         covariance=cov,
         residuals=(r_after / w.ravel()).reshape(-1, 3),
-        residuals_before=y - robot.position(q),
+        residuals_before=(full.residual(np.zeros(len(names))) / w.ravel()).reshape(-1, 3),
         iterations=iterations,
         status=status,
         message=message or STATUS_MESSAGES[status],
@@ -179,7 +179,7 @@ def _covariance(J: np.ndarray, r: np.ndarray, known: bool) -> np.ndarray:
         return np.zeros((0, 0))
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
-    _, s, Vt = np.linalg.svd(J / norms, full_matrices=False)
+    _, s, Vt = np.linalg.svd(triangular(J / norms)[0], full_matrices=False)
     keep = s > nr_threshold(s, J.shape)
     inv = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
     cov = inv / np.outer(norms, norms)

@@ -151,14 +151,26 @@ class Chain:
         self.names = structure.names
         self.index = {n: k for k, n in enumerate(self.names)}
         self.angle_index = [k for k, n in enumerate(self.names) if is_constant_angle(n)]
-        m = len(self.angle_index)
-        self.q = ca.SX.sym("q", len(structure.joint_types))
-        self.p = ca.SX.sym("p", len(self.names))
-        self.cos = ca.SX.sym("cos", m)
-        self.sin = ca.SX.sym("sin", m)
-        self.pext = ca.vertcat(self.p, self.cos, self.sin)
-        trig = {self.names[k]: (self.cos[t], self.sin[t]) for t, k in enumerate(self.angle_index)}
-        P = {name: self.p[k] for k, name in enumerate(self.names)}
+        self._graph = None
+        self._evaluators: dict = {}
+
+    @property
+    def graph(self):
+        """``(q, p, cos, sin, pext, T)``: the CasADi symbols and the pose, built on first use.
+
+        A process whose compiled kernels are all in the disk cache never builds it.
+        """
+        if self._graph is None:
+            self._graph = self._build()
+        return self._graph
+
+    def _build(self):
+        structure, m = self.structure, len(self.angle_index)
+        q = ca.SX.sym("q", len(structure.joint_types))
+        p = ca.SX.sym("p", len(self.names))
+        cos, sin = ca.SX.sym("cos", m), ca.SX.sym("sin", m)
+        trig = {self.names[k]: (cos[t], sin[t]) for t, k in enumerate(self.angle_index)}
+        P = {name: p[k] for k, name in enumerate(self.names)}
 
         def frame(prefix):
             xyz = [P[f"{prefix}_{a}"] for a in "xyz"]
@@ -169,15 +181,14 @@ class Chain:
             T = T @ link_transform(
                 structure.convention,
                 jt,
-                self.q[i - 1],
+                q[i - 1],
                 P[f"theta{i}"],
                 P[f"d{i}"],
                 P[f"a{i}"],
                 trig[f"alpha{i}"],
                 trig.get(f"beta{i}"),
             )
-        self.T = T @ frame("tool")
-        self._evaluators: dict = {}
+        return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
 
     def extended(self, p: np.ndarray) -> np.ndarray:
         """The graph's input: `p` followed by cos and sin of its constant angles."""
@@ -192,22 +203,23 @@ class Chain:
         """
         if not columns:
             return ca.SX(expr.numel(), 0)
+        _, p, cos, sin, _, _ = self.graph
         slot = {k: t for t, k in enumerate(self.angle_index)}
         symbols, where = [], []
         for k in columns:
             if k in slot:
                 where.append((len(symbols), len(symbols) + 1, slot[k]))
-                symbols += [self.cos[slot[k]], self.sin[slot[k]]]
+                symbols += [cos[slot[k]], sin[slot[k]]]
             else:
                 where.append((len(symbols), None, None))
-                symbols.append(self.p[k])
+                symbols.append(p[k])
         J = ca.jacobian(expr, ca.vertcat(*symbols))
         cols = []
         for first, second, t in where:
             if second is None:
                 cols.append(J[:, first])
             else:
-                cols.append(-self.sin[t] * J[:, first] + self.cos[t] * J[:, second])
+                cols.append(-sin[t] * J[:, first] + cos[t] * J[:, second])
         return ca.horzcat(*cols)
 
     def columns(self, parameters: Sequence[str] | None) -> tuple[int, ...]:
@@ -222,16 +234,17 @@ class Chain:
         CasADi stores matrices column-major, so each output is the transpose of what the
         caller sees: ``T.T`` gives a row-major 4 × 4, ``J.T`` (k × 3) a row-major 3 × k.
         """
-        position = self.T[:3, 3]
+        T = self.graph[5]
+        position = T[:3, 3]
         if kind == "fk":
-            return self.T.T
+            return T.T
         if kind == "position":
             return position
         J = self._jacobian(position, columns)
         if kind == "position_jacobian":
             return J.T
         if kind == "pose_jacobian":
-            R = self.T[:3, :3]
+            R = T[:3, :3]
             dR = self._jacobian(ca.vec(R), columns)  # 9 × k, column-major vec of R
             rows = []
             for k in range(len(columns)):
@@ -244,9 +257,8 @@ class Chain:
     def function(self, kind: str, columns: tuple[int, ...] = ()) -> ca.Function:
         """A CasADi Function ``(q, p) -> out`` for one pose, dense output, CSE applied."""
         out = ca.densify(self.expression(kind, columns))
-        f = ca.Function(
-            f"casecal_{kind}", [self.q, self.pext], [out], ["q", "p"], ["out"], {"cse": True}
-        )
+        q, _, _, _, pext, _ = self.graph
+        f = ca.Function(f"casecal_{kind}", [q, pext], [out], ["q", "p"], ["out"], {"cse": True})
         if f.has_free():
             raise RuntimeError(f"internal error: {kind} graph has free symbols")
         return f
@@ -271,40 +283,62 @@ class Chain:
         key = (kind, tuple(columns))
         evaluator = self._evaluators.get(key)
         if evaluator is None:
-            evaluator = self._evaluators[key] = _Evaluator(self.function(kind, key[1]))
+            evaluator = self._evaluators[key] = _Evaluator(self, kind, key[1])
         return evaluator(q, self.extended(p))
+
+    def output_shape(self, kind: str, k: int) -> tuple[int, ...]:
+        """Per-pose output shape of `kind` with `k` parameter columns (C order)."""
+        return {
+            "fk": (4, 4),
+            "position": (3,),
+            "position_jacobian": (3, k),
+            "pose_jacobian": (6, k),
+        }[kind]
 
 
 class _Evaluator:
-    """Batched evaluation of a one-pose Function: compiled C if possible, else CasADi."""
+    """Batched evaluation of one kind of output: compiled C if possible, else CasADi."""
 
-    def __init__(self, function: ca.Function):
-        self.function = function
-        self.shape = function.size_out(0)  # CasADi (rows, cols) of the transposed output
+    def __init__(self, chain: Chain, kind: str, columns: tuple[int, ...]):
+        self.chain, self.kind, self.columns = chain, kind, columns
+        self.shape = chain.output_shape(kind, len(columns))
+        self._function = None
         self._native = None
         self._native_tried = False
 
+    @property
+    def function(self) -> ca.Function:
+        if self._function is None:
+            self._function = self.chain.function(self.kind, self.columns)
+        return self._function
+
     def __call__(self, q: np.ndarray, p: np.ndarray) -> np.ndarray:
         n = q.shape[0]
-        rows, cols = self.shape
-        out_shape = (n, cols, rows) if cols > 1 else (n, rows)
-        if self._use_native(n):
-            out = np.empty(out_shape)
+        if self._use_native(n, p.size):
+            out = np.empty((n, *self.shape))
             self._native(q, p, out)
             return out
-        # CasADi evaluates all N poses in one call when q has N times the expected columns.
-        res = np.asarray(self.function(q.T, p), dtype=float)  # (rows, cols * n)
-        if cols == 1:
+        # CasADi evaluates all N poses in one call when q has N times the expected columns;
+        # its output is the horizontal concatenation of the transposed per-pose outputs
+        res = np.asarray(self.function(q.T, p), dtype=float)
+        if len(self.shape) == 1:
             return res.T.copy()
-        return res.T.reshape(n, cols, rows)
+        return res.T.reshape(n, *self.shape)
 
-    def _use_native(self, n: int) -> bool:
+    def _use_native(self, n: int, n_p: int) -> bool:
         backend = os.environ.get("CASECAL_BACKEND", "auto")
         if backend == "casadi" or (backend == "auto" and n < COMPILE_MIN_POSES):
             return False
         if not self._native_tried:
             self._native_tried = True
-            self._native = _native.compile_function(self.function)
+            key = (self.chain.structure, self.kind, self.columns)
+            self._native = _native.kernel(
+                key,
+                lambda: self.function,
+                n_q=len(self.chain.structure.joint_types),
+                n_p=n_p,
+                n_out=int(np.prod(self.shape)),
+            )
         if self._native is None and backend == "c":
             raise RuntimeError("CASECAL_BACKEND=c but no C compiler could build the kernel")
         return self._native is not None

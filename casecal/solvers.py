@@ -25,27 +25,96 @@ def nr_threshold(s: np.ndarray, shape: tuple[int, int]) -> float:
     return 0.5 * np.sqrt(m + n + 1.0) * (s[0] if s.size else 0.0) * np.finfo(float).eps
 
 
+def triangular(J: np.ndarray, r: np.ndarray | None = None):
+    """Reduce a tall ``J`` (and ``r``) to the R factor of its QR decomposition.
+
+    ``J = Q R`` keeps every inner product of columns (``JᵀJ = RᵀR``), so the singular values,
+    right singular vectors and least-squares solution of ``J`` are those of the small R,
+    with ``Qᵀ r`` in place of ``r``. QR of ``[J | r]`` gives both at once, several times
+    faster than an SVD of the tall ``J``.
+
+    Returns
+    -------
+    R : ndarray, shape (min(m, k), k)
+    Qtr : ndarray, shape (min(m, k),) or None
+    """
+    m, k = J.shape
+    if r is None:
+        return (np.linalg.qr(J, mode="r") if m > k else J), None
+    if m <= k:
+        return J, r
+    Ra = np.linalg.qr(np.column_stack([J, r]), mode="r")
+    return Ra[:k, :k], Ra[:k, k]
+
+
 def svd_solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """``x = D V S⁺ Uᵀ r`` for the column-scaled ``J D``: the paper's SVD least squares."""
+    """``x = D V S⁺ Uᵀ r`` for the column-scaled ``J D``: the paper's SVD least squares.
+
+    Computed on the R factor of ``J D`` (`triangular`): the same singular values and V.
+    """
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
-    U, s, Vt = np.linalg.svd(J / norms, full_matrices=False)
+    R, Qtr = triangular(J / norms, r)
+    U, s, Vt = np.linalg.svd(R, full_matrices=False)
     keep = s > nr_threshold(s, J.shape)
-    z = Vt[keep].T @ ((U[:, keep].T @ r) / s[keep])
+    z = Vt[keep].T @ ((U[:, keep].T @ Qtr) / s[keep])
     return z / norms
 
 
 class Problem:
-    """Weighted residuals and Jacobians of the deviations ``x`` of chosen parameters."""
+    """Weighted residuals and Jacobians of the deviations ``x`` of chosen parameters.
 
-    def __init__(self, robot: Robot, q: np.ndarray, y: np.ndarray, w: np.ndarray, names):
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot.
+    q : ndarray, shape (N, dof)
+    y : ndarray, shape (N, 3)
+        Measured positions, m.
+    w : ndarray, shape (N, 3)
+        Weights, 1/σ.
+    names : sequence of str
+        The parameters whose deviations are ``x``.
+    kernel_names : sequence of str, optional
+        A superset of `names` to evaluate Jacobians for (then sliced): one compiled kernel
+        then serves both the identifiability analysis of all asked-for parameters and the
+        fit of their base set.
+    """
+
+    def __init__(self, robot: Robot, q, y, w, names, kernel_names=None):
         self.robot = robot
         self.chain = kinematics.chain(robot.structure)
         self.q, self.y, self.w = q, y, w
         self.names = tuple(names)
+        kernel_names = tuple(kernel_names or names)
         self.columns = self.chain.columns(self.names)
+        self.kernel_columns = self.chain.columns(kernel_names)
+        self.take = [kernel_names.index(n) for n in self.names]
         self.p0 = robot.vector()
         self.w_flat = w.ravel()
+        self._memo: dict = {}  # (kind, p bytes) -> array; shared with `restricted` copies
+
+    def restricted(self, names) -> Problem:
+        """The same data and kernel for a subset of the parameters (shares the memo)."""
+        other = Problem.__new__(Problem)
+        other.__dict__.update(self.__dict__)
+        other.names = tuple(names)
+        other.columns = self.chain.columns(other.names)
+        kernel_names = [self.chain.names[c] for c in self.kernel_columns]
+        other.take = [kernel_names.index(n) for n in other.names]
+        return other
+
+    def _evaluate(self, kind: str, p: np.ndarray) -> np.ndarray:
+        # solvers, the identifiability analysis and the result ask for the same points
+        key = (kind, p.tobytes())
+        value = self._memo.get(key)
+        if value is None:
+            columns = self.kernel_columns if kind == "position_jacobian" else ()
+            value = self.chain.evaluate(kind, self.q, p, columns)
+            if len(self._memo) >= 8:
+                self._memo.pop(next(iter(self._memo)))
+            self._memo[key] = value
+        return value
 
     def p(self, x: np.ndarray) -> np.ndarray:
         p = self.p0.copy()
@@ -54,13 +123,15 @@ class Problem:
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         """Weighted ``y - f``, shape (3N,), pose-major."""
-        f = self.chain.evaluate("position", self.q, self.p(x))
+        f = self._evaluate("position", self.p(x))
         return ((self.y - f) * self.w).ravel()
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """Weighted ``∂f/∂x``, shape (3N, k)."""
-        J = self.chain.evaluate("position_jacobian", self.q, self.p(x), self.columns)
-        return J.reshape(-1, len(self.names)) * self.w_flat[:, None]
+        J = self._evaluate("position_jacobian", self.p(x)).reshape(-1, len(self.kernel_columns))
+        if len(self.take) != J.shape[1]:
+            J = J[:, self.take]
+        return J * self.w_flat[:, None]
 
 
 def _svd(problem: Problem, x0, **_):
@@ -152,48 +223,110 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, **_):
     return x, max_iterations, 0, history, None
 
 
+class _LeastSquares:
+    """Objective ``0.5 (|r(z)|² + |w_p z|²) / scale``, its gradient and Gauss-Newton Hessian.
+
+    ``z = x · norms`` are the column-scaled deviations; ``w_p`` the prior's weights. The
+    Jacobian at the last point is kept, since IPOPT asks for gradient and Hessian at the
+    same point.
+    """
+
+    def __init__(self, problem: Problem, norms, scale, prior_w):
+        self.problem, self.norms, self.scale, self.prior_w = problem, norms, scale, prior_w
+        self._at, self._J = None, None
+
+    def _jacobian(self, z):
+        if self._at is None or not np.array_equal(z, self._at):
+            self._at, self._J = z.copy(), self.problem.jacobian(z / self.norms) / self.norms
+        return self._J
+
+    def value(self, z):
+        r = self.problem.residual(z / self.norms)
+        return 0.5 * (r @ r + np.sum((self.prior_w * z) ** 2)) / self.scale
+
+    def gradient(self, z):
+        r = self.problem.residual(z / self.norms)
+        return (-self._jacobian(z).T @ r + self.prior_w**2 * z) / self.scale
+
+    def hessian(self, z):
+        J = self._jacobian(z)
+        return (J.T @ J + np.diag(self.prior_w**2)) / self.scale
+
+
+class _Callback(ca.Callback):
+    """A CasADi Function of dense inputs evaluated in Python (by compiled kernels)."""
+
+    def __init__(self, name, inputs, output, evaluate, jacobian=None):
+        ca.Callback.__init__(self)
+        self._inputs, self._output = inputs, output
+        self._evaluate, self._jacobian_factory, self._keep = evaluate, jacobian, None
+        self.construct(name, {"enable_fd": False})
+
+    def get_n_in(self):
+        return len(self._inputs)
+
+    def get_n_out(self):
+        return 1
+
+    def get_sparsity_in(self, i):
+        return self._inputs[i]
+
+    def get_sparsity_out(self, i):
+        return self._output
+
+    def eval(self, arg):
+        return [self._evaluate(*[np.array(a, dtype=float).ravel() for a in arg])]
+
+    def has_jacobian(self):
+        return self._jacobian_factory is not None
+
+    def get_jacobian(self, name, inames, onames, opts):
+        self._keep = self._jacobian_factory(name)  # CasADi does not own Python callbacks
+        return self._keep
+
+
 def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior):
-    """IPOPT on the scaled problem, objective normalised by its start value, GN Hessian."""
-    ch, k, n = problem.chain, len(problem.names), problem.q.shape[0]
+    """IPOPT on the scaled problem, objective normalised by its start value, GN Hessian.
+
+    The objective, its gradient and the Gauss-Newton Hessian ``JᵀJ`` are CasADi Callbacks
+    that evaluate through the compiled kernels, so IPOPT never runs the graph in CasADi's
+    interpreter and no graph over all poses is built.
+    """
+    k = len(problem.names)
     for name in {**bounds, **prior}:
         if name not in problem.names:
             raise CalibrationError(
                 f"bounds/prior name {name!r} is not among the estimated parameters "
                 f"({', '.join(problem.names)})"
             )
-    J0 = problem.jacobian(x0)
-    norms = np.linalg.norm(J0, axis=0)
+    norms = np.linalg.norm(problem.jacobian(x0), axis=0)
     norms[norms == 0] = 1.0
     r0 = problem.residual(x0)
     scale = max(0.5 * r0 @ r0, _floor(problem))
-
-    z = ca.MX.sym("z", k)
-    x = z / norms
-    p = ca.MX(problem.p0)
-    p = p + ca.MX(_selector(len(problem.p0), problem.columns)) @ x
-    angles = p[ch.angle_index]
-    pext = ca.vertcat(p, ca.cos(angles), ca.sin(angles))
-    Q = ca.DM(problem.q.T)
-    W = ca.DM(problem.w.T)
-    f_pos = ch.function("position").map(n)
-    f_jac = ch.function("position_jacobian", problem.columns).map(n)
-    res = W * (ca.DM(problem.y.T) - f_pos(Q, pext))  # 3 × N
     sig = np.array([prior.get(name, np.inf) for name in problem.names])
     prior_w = np.where(np.isfinite(sig), 1.0 / sig, 0.0) / norms  # per z
-    cost = 0.5 * ca.sumsqr(res) + 0.5 * ca.sumsqr(prior_w * z)
-    Jt = f_jac(Q, pext) * ca.repmat(ca.reshape(W, 1, 3 * n), k, 1)  # k × 3N, ∂f/∂x
-    Jz = Jt / ca.repmat(ca.DM(norms), 1, 3 * n)
-    lam_f = ca.MX.sym("lam_f")
-    H = lam_f * (Jz @ Jz.T + ca.diag(prior_w**2)) / scale
-    hess = ca.Function(
-        "nlp_hess_l", [z, ca.MX.sym("p", 0), lam_f, ca.MX.sym("lam_g", 0)], [ca.triu(H)]
+    ls = _LeastSquares(problem, norms, scale, prior_w)
+    dense = ca.Sparsity.dense
+    z_sp, scalar, empty = dense(k, 1), dense(1, 1), dense(0, 1)
+    gradient = _Callback(
+        "casecal_grad_f", [z_sp, scalar], dense(1, k), lambda z, f: ca.DM(ls.gradient(z)).T
     )
+    objective = _Callback(
+        "casecal_f", [z_sp], scalar, lambda z: ca.DM(ls.value(z)), jacobian=lambda name: gradient
+    )
+    hessian = _Callback(
+        "nlp_hess_l",
+        [z_sp, empty, scalar, empty],
+        ca.Sparsity.upper(k),
+        lambda z, p, lam_f, lam_g: ca.triu(ca.DM(lam_f[0] * ls.hessian(z))),
+    )
+    z = ca.MX.sym("z", k)
     solver = ca.nlpsol(
         "casecal_ipopt",
         "ipopt",
-        {"x": z, "f": cost / scale},
+        {"x": z, "f": objective(z)},
         {
-            "hess_lag": hess,
+            "hess_lag": hessian,
             "print_time": False,
             "ipopt.print_level": 0,
             "ipopt.sb": "yes",
@@ -221,12 +354,6 @@ def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior):
     if stats.get("return_status") == "Maximum_Iterations_Exceeded":
         status, message = 0, None
     return x_opt, int(stats.get("iter_count", 0)), status, history, message
-
-
-def _selector(n: int, columns) -> np.ndarray:
-    E = np.zeros((n, len(columns)))
-    E[list(columns), range(len(columns))] = 1.0
-    return E
 
 
 SOLVERS = {
