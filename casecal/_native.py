@@ -84,7 +84,9 @@ def fingerprint() -> str:
     global _FINGERPRINT
     if _FINGERPRINT is None:
         here = Path(__file__).parent
-        text = "".join((here / f).read_text() for f in ("kinematics.py", "_native.py"))
+        # parameters.py fixes the layout of p: a change there must not reuse old kernels
+        files = ("kinematics.py", "_native.py", "parameters.py")
+        text = "".join((here / f).read_text() for f in files)
         text += ca.__version__ + " ".join(CFLAGS)
         _FINGERPRINT = hashlib.sha256(text.encode()).hexdigest()
     return _FINGERPRINT

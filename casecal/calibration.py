@@ -11,7 +11,7 @@ import pandas as pd
 import scipy.stats
 
 from .identifiability import Observability
-from .parameters import is_length
+from .parameters import is_length, unit
 from .robot import Robot
 
 # casecal statuses, one table for every method (scipy style: success = status > 0)
@@ -24,6 +24,11 @@ STATUS_MESSAGES = {
     4: "converged: residuals are at the rounding floor of the data",
     5: "converged: the solver's optimality tolerance was met",
 }
+
+
+POORLY_DETERMINED = {"m": 1e-3, "rad": math.radians(0.1)}
+"""Standard errors above these (1 mm, 0.1°) mark an estimate the data barely constrain:
+no industrial arm is calibrated usefully with a parameter that uncertain."""
 
 
 def display_unit(name: str) -> tuple[str, float]:
@@ -133,6 +138,13 @@ class Calibration:
         return float(np.max(np.linalg.norm(self.residuals_before, axis=1)))
 
     @property
+    def poorly_determined(self) -> tuple[str, ...]:
+        """Estimated parameters whose standard error exceeds `POORLY_DETERMINED`."""
+        return tuple(
+            n for n in self.estimated if not self.standard_errors[n] <= POORLY_DETERMINED[unit(n)]
+        )
+
+    @property
     def dof_residual(self) -> int:
         """Residual degrees of freedom, 3N − k."""
         return 3 * self.n_poses - len(self.estimated)
@@ -180,7 +192,12 @@ class Calibration:
                 status = "held at nominal: unidentifiable"
             elif name in combos:
                 spot = combos[name]
-                status = f"stands for {spot.visible}" if spot.visible else "blind combination"
+                meaning = spot.visible_as(name)
+                status = f"stands for {meaning}" if meaning else "blind combination"
+                if se > POORLY_DETERMINED[unit(name)]:
+                    status += ", poorly determined"
+            elif se > POORLY_DETERMINED[unit(name)]:
+                status = "poorly determined"
             else:
                 status = "identified"
             row = {

@@ -55,6 +55,7 @@ def _schedule(robot, args):
 
 def _cmd_simulate(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
+    _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
     deviations = load_deviations(args.deviations, robot) if args.deviations else {}
     true = robot.with_deviations(deviations)
     q = _schedule(robot, args)
@@ -72,6 +73,8 @@ def _cmd_simulate(args: argparse.Namespace) -> None:
 def _cmd_identify(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
     meas = read_csv(args.measurements, robot)
+    if args.output:  # fail before the work, not after it
+        _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
     noise = parse_length(args.noise) if args.noise is not None else None
     truth = load_deviations(args.truth, robot) if args.truth else None
     cal = identify(
@@ -110,6 +113,8 @@ def _check_writable_dir(path) -> None:
     from pathlib import Path
 
     p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise CalibrationError(f"{str(p)!r} is a file, not a folder; choose another output")
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -44,12 +44,24 @@ class BlindSpot:
         e.g. ``"d2 + d3 + d4"``; None when the group has none (a zero column) or several.
     text : str
         One sentence in words.
+    coefficients : tuple of float or None
+        Of `visible`, per member, relative to the first member (physical units).
     """
 
     members: tuple[str, ...]
     blind: tuple[str, ...]
     visible: str | None
     text: str
+    coefficients: tuple[float, ...] | None = None
+
+    def visible_as(self, member: str) -> str | None:
+        """`visible` written with `member` leading (coefficient 1): what its estimate means."""
+        if self.coefficients is None:
+            return None
+        i = self.members.index(member)
+        order = [i, *(k for k in range(len(self.members)) if k != i)]
+        coeffs = np.array(self.coefficients)[order]
+        return _expression(coeffs, [self.members[k] for k in order])
 
 
 @dataclass(frozen=True)
@@ -161,7 +173,7 @@ def analyse(J: np.ndarray, names, n_poses: int, tolerance: float = RANK_TOLERANC
     spots += _group_spots(blind_rows, live, J[:, ~zero])
     unident = {m for spot in spots for m in spot.members}
 
-    base = _base_parameters(Js, names, zero, rank)
+    base = _base_parameters(Js, names, zero, rank, tolerance * s_max)
     return Observability(
         parameters=names,
         singular_values=s,
@@ -254,8 +266,10 @@ def _group_spots(rows: np.ndarray, names: list[str], J: np.ndarray) -> list[Blin
         g_rows = rows[[bool(support[r][idx].any()) for r in range(rows.shape[0])]]
         # rows are in the scaled coordinates: convert to physical coefficients
         norms = np.linalg.norm(J[:, idx], axis=0)
-        blind = tuple(_expression(row[idx] / norms, members) for row in g_rows)
-        visible = None
+        # a null vector is a *direction* δp (units of each member); the visible combination
+        # is a *functional* Σ c_i δp_i (units lead / member): their units invert
+        blind = tuple(_expression(row[idx] / norms, members, direction=True) for row in g_rows)
+        visible, coeffs = None, None
         if len(idx) - len(g_rows) == 1:  # the group's columns are all parallel
             ref = J[:, idx[0]]
             coeffs = J[:, idx].T @ ref / (ref @ ref)
@@ -267,12 +281,20 @@ def _group_spots(rows: np.ndarray, names: list[str], J: np.ndarray) -> list[Blin
         else:
             what = "1 combination is" if len(g_rows) == 1 else f"{len(g_rows)} combinations are"
             text = f"{', '.join(members)}: {what} blind: " + "; ".join(blind)
-        spots.append(BlindSpot(members, blind, visible, text))
+        spots.append(
+            BlindSpot(
+                members, blind, visible, text, None if coeffs is None else tuple(coeffs.tolist())
+            )
+        )
     return spots
 
 
-def _expression(coeffs: np.ndarray, members) -> str:
-    """``c1*p1 + c2*p2 …`` normalised so the first coefficient is 1, units on the others."""
+def _expression(coeffs: np.ndarray, members, direction: bool = False) -> str:
+    """``p1 + c2·p2 …`` normalised so the first coefficient is 1, units on the others.
+
+    For a functional (``direction=False``) a coefficient has units lead/member; for a
+    direction in parameter space (a null vector, ``direction=True``) member/lead.
+    """
     lead = int(np.flatnonzero(np.abs(coeffs) > 1e-12 * np.abs(coeffs).max())[0])
     coeffs = coeffs / coeffs[lead]
     ref_unit = unit(members[lead])
@@ -286,7 +308,9 @@ def _expression(coeffs: np.ndarray, members) -> str:
         if np.isclose(mag, 1.0, rtol=1e-6) and u == ref_unit:
             term = name
         else:
-            scale = "" if u == ref_unit else f" {ref_unit}/{u}"
+            scale = (
+                "" if u == ref_unit else (f" {u}/{ref_unit}" if direction else f" {ref_unit}/{u}")
+            )
             term = f"{mag:.4g}{scale}·{name}"
         terms.append((sign, term))
     text = terms[0][1] if terms[0][0] == "+" else "-" + terms[0][1]
@@ -295,14 +319,15 @@ def _expression(coeffs: np.ndarray, members) -> str:
     return text
 
 
-def _base_parameters(Js: np.ndarray, names, zero: np.ndarray, rank: int) -> tuple[str, ...]:
+def _base_parameters(Js: np.ndarray, names, zero, rank: int, threshold: float) -> tuple[str, ...]:
     """A largest independent subset of columns: QR with the pivot order fixed.
 
     Columns are taken in canonical order (theta1, d1, a1, alpha1, …, base, tool) and kept
-    when their component orthogonal to the columns kept so far exceeds the rank tolerance
-    (Gram-Schmidt, applied twice for stability). So the first parameter of each blind group
-    is estimated and the later ones are held: a predictable choice, where LAPACK's
-    largest-norm pivoting would pick among equal-norm scaled columns by rounding noise.
+    when their component orthogonal to the columns kept so far exceeds `threshold`, the
+    rank's own cut-off (Gram-Schmidt, applied twice for stability). So the first parameter
+    of each blind group is estimated and the later ones are held: a predictable choice,
+    where LAPACK's largest-norm pivoting would pick among equal-norm scaled columns by
+    rounding noise.
     Falls back to pivoted QR (geqp3) if the greedy pass disagrees with the SVD rank.
     """
     if rank == 0:
@@ -316,7 +341,7 @@ def _base_parameters(Js: np.ndarray, names, zero: np.ndarray, rank: int) -> tupl
         for _ in range(2):
             v -= basis @ (basis.T @ v)
         norm = np.linalg.norm(v)
-        if norm > np.sqrt(RANK_TOLERANCE):
+        if norm > threshold:
             basis = np.column_stack([basis, v / norm])
             chosen.append(name)
     if len(chosen) != rank:

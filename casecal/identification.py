@@ -22,7 +22,7 @@ import numpy as np
 from .calibration import STATUS_MESSAGES, Calibration
 from .errors import CalibrationError
 from .identifiability import analyse, selection
-from .measurements import Measurements
+from .measurements import Measurements, broadcast_sigma
 from .robot import Robot
 from .solvers import SOLVERS, Problem, nr_threshold, triangular
 
@@ -94,6 +94,15 @@ def identify(
         raise CalibrationError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
     if (bounds or prior) and method != "ipopt":
         raise CalibrationError("bounds and prior need method='ipopt'")
+    bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
+    if (
+        isinstance(max_iterations, bool)
+        or not isinstance(max_iterations, int)
+        or max_iterations < 1
+    ):
+        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if not (isinstance(tolerance, int | float) and 0 < tolerance < 1):
+        raise CalibrationError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
     names = selection(robot, parameters)
     if measurements.q.shape[1] != robot.dof:
         raise CalibrationError(
@@ -101,10 +110,13 @@ def identify(
             f"{robot.name!r} has {robot.dof} joints; use the robot the data came from"
         )
     q, y = measurements.q, measurements.positions
-    sigma = measurements.sigma if noise is None else _sigma(noise, q.shape[0])
+    sigma = measurements.sigma if noise is None else broadcast_sigma(noise, q.shape[0])
     known = bool(np.all(sigma > 0))
     if not known and np.any(sigma > 0):
-        raise CalibrationError("noise sigma is zero for some coordinates and not others")
+        raise CalibrationError(
+            "noise sigma is zero for some coordinates and not others; give every coordinate "
+            "its sigma (> 0), or none (0 everywhere) to weigh all alike"
+        )
     w = 1.0 / sigma if known else np.ones_like(y)
     if prior and not known:
         raise CalibrationError(
@@ -122,12 +134,17 @@ def identify(
             f"{len(names)} parameters asked for, so they cannot tell which are blind; "
             f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
         )
+    if not estimated:
+        raise CalibrationError(
+            f"none of the asked-for parameters ({', '.join(names)}) moves the measured point at "
+            "these poses; ask for others or measure other poses"
+        )
     problem = full.restricted(estimated)
     x0 = np.zeros(len(estimated))
     solver = SOLVERS[method]
     kwargs = {"max_iterations": max_iterations, "tolerance": tolerance}
     if method == "ipopt":
-        kwargs.update(bounds=bounds or {}, prior=prior or {})
+        kwargs.update(bounds=bounds, prior=prior)
     x, iterations, status, history, message = solver(problem, x0, **kwargs)
 
     deviations = dict.fromkeys(names, 0.0)
@@ -135,7 +152,8 @@ def identify(
     calibrated = robot.with_deviations({n: deviations[n] for n in estimated})
     r_after = problem.residual(x)
     J = problem.jacobian(x)
-    cov = _covariance(J, r_after, known)
+    prior_w = np.array([1.0 / prior[n] if n in prior else 0.0 for n in estimated])
+    cov = _covariance(J, r_after, known, prior_w)
     se = dict.fromkeys(names, float("nan"))
     se.update(zip(estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
     cal = Calibration(
@@ -185,24 +203,47 @@ def _nominal_analysis(full: Problem):
     return hit[0]
 
 
-def _sigma(noise, n: int) -> np.ndarray:
-    try:
-        arr = np.asarray(noise, dtype=float)
-        sigma = np.broadcast_to(arr if arr.ndim != 1 or arr.size == 3 else arr[:, None], (n, 3))
-    except ValueError:
-        raise CalibrationError(
-            f"noise must be a scalar, 3 values (x, y, z) or one per pose, in m; got {noise!r}"
-        ) from None
-    if not np.all(np.isfinite(sigma)) or np.any(sigma < 0):
-        raise CalibrationError("noise sigma must be finite and non-negative (m)")
-    return sigma.copy()
+def _check_bounds(bounds: dict) -> dict:
+    out = {}
+    for name, pair in bounds.items():
+        try:
+            lo, hi = (float(v) for v in pair)
+        except (TypeError, ValueError):
+            raise CalibrationError(
+                f"bounds[{name!r}] = {pair!r}; give (lower, upper) deviations in SI units"
+            ) from None
+        if np.isnan(lo) or np.isnan(hi) or not lo < hi:
+            raise CalibrationError(f"bounds[{name!r}] = ({lo}, {hi}): lower must be below upper")
+        out[name] = (lo, hi)
+    return out
 
 
-def _covariance(J: np.ndarray, r: np.ndarray, known: bool) -> np.ndarray:
-    """``(JᵀJ)⁻¹`` of the weighted Jacobian, times the residual variance when σ is unknown."""
+def _check_prior(prior: dict) -> dict:
+    out = {}
+    for name, sd in prior.items():
+        try:
+            sd = float(sd)
+        except (TypeError, ValueError):
+            raise CalibrationError(f"prior[{name!r}] = {sd!r} is not a number") from None
+        if not (np.isfinite(sd) and sd > 0):
+            raise CalibrationError(
+                f"prior[{name!r}] = {sd}: a prior standard deviation must be finite and > 0 (SI)"
+            )
+        out[name] = sd
+    return out
+
+
+def _covariance(J: np.ndarray, r: np.ndarray, known: bool, prior_w=None) -> np.ndarray:
+    """``(JᵀJ + W_p²)⁻¹`` of the weighted Jacobian and prior weights ``W_p = 1/σ_p``.
+
+    Scaled by the residual variance ``RSS / (3N - k)`` when σ is unknown; NaN when there
+    are no residual degrees of freedom to estimate it from.
+    """
     k = J.shape[1]
     if k == 0:
         return np.zeros((0, 0))
+    if prior_w is not None and np.any(prior_w > 0):
+        J = np.vstack([J, np.diag(prior_w)])
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
     _, s, Vt = np.linalg.svd(triangular(J / norms)[0], full_matrices=False)
@@ -210,6 +251,6 @@ def _covariance(J: np.ndarray, r: np.ndarray, known: bool) -> np.ndarray:
     inv = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
     cov = inv / np.outer(norms, norms)
     if not known:
-        dof = max(J.shape[0] - k, 1)
-        cov = cov * float(r @ r) / dof
+        dof = r.size - k
+        cov = cov * (float(r @ r) / dof if dof > 0 else np.nan)
     return cov

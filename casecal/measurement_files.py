@@ -78,10 +78,10 @@ def read_csv(path, robot: Robot) -> Measurements:
         name, scale = _pick(df, label, [axis], None)
         y[:, k] = _numbers(df, name, label) * scale
     sigma = np.zeros((len(df), 3))
-    if any(c in df for c in ("sigma", "sigma_mm")):
+    if any(c in df for c in ("sigma", "sigma_m", "sigma_mm", "sigma_um")):
         name, scale = _pick(df, label, ["sigma"], None)
         sigma[:] = (_numbers(df, name, label) * scale)[:, None]
-    elif any(c.startswith("sigma_") for c in columns):
+    elif any(re.fullmatch(r"sigma_[xyz](_(mm|m|um))?", c) for c in columns):
         for k, axis in enumerate("xyz"):
             name, scale = _pick(df, label, [f"sigma_{axis}"], None)
             sigma[:, k] = _numbers(df, name, label) * scale
@@ -120,11 +120,20 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
 def write_atomic(path, text: str) -> None:
     """Write `text` to `path` through a temporary file and a rename: never half a file."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or Path("."))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or Path("."))
+    except OSError as exc:
+        raise CalibrationError(
+            f"cannot write {str(path)!r}: {exc.strerror}; check that its folder exists and is "
+            "writable"
+        ) from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
         os.replace(tmp, path)
+    except IsADirectoryError:
+        Path(tmp).unlink(missing_ok=True)
+        raise CalibrationError(f"{str(path)!r} is a folder; give a file name") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -142,7 +151,7 @@ def _mangled(columns) -> set[str]:
 def _pick(df: pd.DataFrame, label: str, bases, joint) -> tuple[str, float]:
     """The one column holding `bases[0]` in some unit, and its scale to SI."""
     base = bases[0]
-    units = ["", "rad", "deg"] if joint is not None and joint.type == "R" else ["", "m", "mm"]
+    units = ["", "rad", "deg"] if joint is not None and joint.type == "R" else ["", "m", "mm", "um"]
     found = [
         (f"{base}_{u}" if u else base, u) for u in units if (f"{base}_{u}" if u else base) in df
     ]

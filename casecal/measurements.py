@@ -10,6 +10,27 @@ from .errors import CalibrationError
 from .robot import Robot, check_joint_values
 
 
+def broadcast_sigma(sigma, n: int) -> np.ndarray:
+    """Noise σ as an (n, 3) array, m.
+
+    Accepts a scalar (every coordinate), 3 values (per axis x, y, z), n values (per pose,
+    isotropic; with n = 3 three values are read per axis) or an (n, 3) array.
+    """
+    try:
+        arr = np.asarray(sigma, dtype=float)
+        if arr.ndim == 1 and arr.size == n and arr.size != 3:
+            arr = arr[:, None]
+        out = np.broadcast_to(arr, (n, 3)).copy()
+    except (TypeError, ValueError):
+        raise CalibrationError(
+            f"noise sigma {sigma!r} does not fit {n} poses; give a number, 3 values (x, y, z), "
+            "one per pose or (N, 3), in m"
+        ) from None
+    if not np.all(np.isfinite(out)) or np.any(out < 0):
+        raise CalibrationError("noise sigma must be finite and non-negative (m)")
+    return out
+
+
 @dataclass(frozen=True)
 class Measurements:
     """Joint readings and the measured tool-point positions at those poses.
@@ -34,8 +55,11 @@ class Measurements:
     kind: str = "position"
 
     def __post_init__(self) -> None:
-        q = np.atleast_2d(np.asarray(self.q, dtype=float))
-        y = np.atleast_2d(np.asarray(self.positions, dtype=float))
+        q, _ = check_joint_values(self.q, np.shape(self.q)[-1] if np.ndim(self.q) else 0)
+        try:
+            y = np.atleast_2d(np.asarray(self.positions, dtype=float))
+        except (TypeError, ValueError):
+            raise CalibrationError("measured positions are not numbers") from None
         if y.shape != (q.shape[0], 3):
             raise CalibrationError(
                 f"measured positions have shape {y.shape}; expected ({q.shape[0]}, 3), "
@@ -43,18 +67,7 @@ class Measurements:
             )
         if not np.all(np.isfinite(y)):
             raise CalibrationError("measured positions contain NaN or inf; remove those rows")
-        sigma = np.asarray(self.sigma, dtype=float)
-        if sigma.ndim == 1 and sigma.size == q.shape[0] and sigma.size != 3:
-            sigma = sigma[:, None]  # one isotropic sigma per pose
-        try:
-            sigma = np.broadcast_to(sigma, (q.shape[0], 3)).copy()
-        except ValueError:
-            raise CalibrationError(
-                f"noise sigma of shape {sigma.shape} does not fit {q.shape[0]} poses; give a "
-                "scalar, 3 values (x, y, z), one per pose, or (N, 3), in m"
-            ) from None
-        if np.any(sigma < 0) or not np.all(np.isfinite(sigma)):
-            raise CalibrationError("noise sigma must be finite and non-negative (m)")
+        sigma = broadcast_sigma(self.sigma, q.shape[0])
         for name, value in (("q", q), ("positions", y), ("sigma", sigma)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -85,9 +98,7 @@ def simulate(true_robot: Robot, q, noise=0.0, seed=None) -> Measurements:
     Measurements
     """
     q2, _ = check_joint_values(q, true_robot.dof)
-    sigma = np.broadcast_to(np.asarray(noise, dtype=float), (3,))
-    if np.any(sigma < 0) or not np.all(np.isfinite(sigma)):
-        raise CalibrationError(f"noise {noise!r} must be finite and non-negative (m)")
+    sigma = broadcast_sigma(noise, q2.shape[0])
     positions = true_robot.position(q2)
     if np.any(sigma > 0):
         positions = positions + np.random.default_rng(seed).normal(size=positions.shape) * sigma

@@ -96,7 +96,17 @@ def select(
     """
     if spec is None:
         spec = default
-    tokens = [t.strip() for t in spec.split(",")] if isinstance(spec, str) else list(spec)
+    if isinstance(spec, str):
+        tokens = [t.strip() for t in spec.split(",") if t.strip()]
+    else:
+        try:
+            tokens = list(spec)
+        except TypeError:
+            raise CalibrationError(
+                f"parameters={spec!r} is not understood; give names, families like 'a*', or 'all'"
+            ) from None
+    if not tokens:
+        raise CalibrationError("no parameters selected; give names, families like 'a*', or 'all'")
     chosen: set[str] = set()
     for token in tokens:
         if not isinstance(token, str) or not token:

@@ -195,7 +195,10 @@ class Robot:
                     f"robot {self.name!r} has no parameter {name!r}; "
                     f"its parameters are: {', '.join(p)}"
                 )
-            value = float(value)
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise CalibrationError(f"parameter {name!r}: {value!r} is not a number") from None
             if not math.isfinite(value):
                 raise CalibrationError(f"parameter {name!r}: value {value} is not finite")
             p[name] = value
@@ -235,7 +238,13 @@ class Robot:
                 f"robot {self.name!r} has no parameter {unknown[0]!r}; "
                 f"its parameters are: {', '.join(p)}"
             )
-        return self.with_parameters({n: p[n] + float(v) for n, v in deviations.items()})
+        values = {}
+        for n, v in deviations.items():
+            try:
+                values[n] = p[n] + float(v)
+            except (TypeError, ValueError):
+                raise CalibrationError(f"deviation of {n!r}: {v!r} is not a number") from None
+        return self.with_parameters(values)
 
     # --- kinematics -------------------------------------------------------------------
 
@@ -319,10 +328,10 @@ def check_joint_values(q, dof: int) -> tuple[np.ndarray, bool]:
         raise CalibrationError(f"joint values are not numbers: {exc}") from None
     single = arr.ndim == 1
     arr = np.atleast_2d(arr)
-    if arr.ndim != 2 or arr.shape[1] != dof:
+    if arr.ndim != 2 or arr.shape[1] != dof or arr.shape[0] == 0 or dof == 0:
         raise CalibrationError(
-            f"joint values have shape {np.shape(q)}; this robot has {dof} joints, so give "
-            f"shape ({dof},) for one pose or (N, {dof}) for N poses"
+            f"joint values have shape {np.shape(q)}; give shape ({dof},) for one pose or "
+            f"(N, {dof}) for N >= 1 poses of a robot with {dof} joints"
         )
     if not np.all(np.isfinite(arr)):
         bad = int(np.argwhere(~np.isfinite(arr))[0][0])

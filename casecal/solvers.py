@@ -331,7 +331,7 @@ def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior):
             "ipopt.print_level": 0,
             "ipopt.sb": "yes",
             "ipopt.max_iter": max_iterations,
-            "ipopt.tol": 1e-10,  # the scaled gradient's rounding floor is ~1e-11
+            "ipopt.tol": max(tolerance, 1e-10),  # the scaled gradient's rounding floor is ~1e-11
             "ipopt.acceptable_iter": 0,
             "ipopt.bound_relax_factor": 0.0,  # bounds the user gave hold exactly
         },

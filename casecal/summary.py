@@ -53,6 +53,8 @@ def format_table(df: pd.DataFrame) -> str:
 def _short_status(status: str) -> str:
     if status.startswith("held"):
         return "held at nominal"
+    if status == "poorly determined":
+        return "POORLY DETERMINED"
     if status.startswith("stands for"):
         return "= " + status.removeprefix("stands for ")
     return "" if status == "identified" else status
@@ -110,6 +112,16 @@ def _notes(cal: Calibration) -> list[str]:
         )
         for spot in obs.blind_spots:
             notes.append(spot.text + ".")
+    poor = cal.poorly_determined
+    if poor:
+        shown = ", ".join(f"{n} ± {_se_text(n, cal.standard_errors[n])}" for n in poor[:6]) + (
+            " …" if len(poor) > 6 else ""
+        )
+        notes.append(
+            f"{len(poor)} estimates are poorly determined (standard error above 1 mm or 0.1°): "
+            f"{shown}. The poses barely constrain them and noise is amplified along them; "
+            "do not use them without more or better-spread poses."
+        )
     cond = obs.indices.get("O2", np.inf)
     if np.isfinite(cond) and cond > CONDITION_WARNING:
         notes.append(
@@ -123,6 +135,13 @@ def _notes(cal: Calibration) -> list[str]:
             f"({_residual_scale(cal) * 1e3:.3g} mm per coordinate)."
         )
     return notes
+
+
+def _se_text(name: str, se: float) -> str:
+    from .calibration import display_unit
+
+    u, f = display_unit(name)
+    return f"{se * f:.3g} {u}"
 
 
 def _residual_scale(cal: Calibration) -> float:

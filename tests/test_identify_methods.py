@@ -115,7 +115,9 @@ def test_result_object(tmp_path):
     } <= set(table.columns)
     row = table.set_index("parameter").loc["a2"]
     assert row.unit == "mm" and row.deviation == pytest.approx(cal.deviations["a2"] * 1e3)
-    assert row.ci95_low < row.deviation < row.ci95_high
+    # sigma is known here: the 95 % interval is the normal one, ±1.96 standard errors
+    assert cal.sigma_known
+    assert row.ci95_high - row.ci95_low == pytest.approx(2 * 1.959964 * row.std_error, rel=1e-6)
     text = str(cal.summary())
     assert "RMS before" in text and "mm" in text and "Notes:" in text
     assert cal.summary().to_frame().shape[0] == len(cal.parameters)

@@ -1,0 +1,122 @@
+"""Weighting, other conventions and joint types, and every user mistake ending in one message."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import casecal as cc
+from casecal.cli import main
+from casecal.measurement_files import read_csv
+
+DH = ["theta*", "d*", "a*", "alpha*"]
+
+
+def test_per_axis_sigma_weights_the_fit_as_the_textbook_covariance_says():
+    """Standard errors with per-axis sigma equal (Jᵀ Σ⁻¹ J)⁻¹ computed here from the
+    robot's own Jacobian, and grow when one axis is noisier."""
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 50, seed=0)
+    meas = cc.simulate(robot, q)
+    sigma = np.array([0.01e-3, 0.01e-3, 0.1e-3])  # z ten times noisier
+    cal = cc.identify(robot, meas, ["theta*", "a*", "d*"], "gauss-newton", noise=sigma)
+    J, names = cal.robot.position_jacobian(q, list(cal.estimated))
+    Jw = (J / sigma[None, :, None]).reshape(-1, len(names))
+    expected = np.sqrt(np.diag(np.linalg.inv(Jw.T @ Jw)))
+    got = np.array([cal.standard_errors[n] for n in names])
+    np.testing.assert_allclose(got, expected, rtol=1e-6)
+    iso = cc.identify(robot, meas, ["theta*", "a*", "d*"], "gauss-newton", noise=0.01e-3)
+    assert all(cal.standard_errors[n] >= iso.standard_errors[n] * (1 - 1e-9) for n in names)
+
+
+@pytest.mark.parametrize("name", ["puma560_craig", "scara"])
+def test_modified_dh_and_prismatic_robots_are_identified_exactly(name):
+    robot = cc.load_robot(name)
+    q = cc.poses.uniform(robot, 80, seed=1)
+    obs = cc.observability(robot, q, DH)
+    rng = np.random.default_rng(2)
+    truth = {n: rng.normal(scale=1e-4) for n in obs.identifiable}
+    meas = cc.simulate(robot.with_deviations(truth), q)
+    for method in ("gauss-newton", "lm", "ipopt"):
+        cal = cc.identify(robot, meas, DH, method, truth=truth)
+        assert cal.success and cal.rms < 1e-12, (name, method, cal.message)
+        for n in truth:
+            assert cal.deviations[n] == pytest.approx(truth[n], rel=1e-6, abs=1e-12), (name, n)
+
+
+def test_blind_directions_and_visible_combinations_carry_their_units():
+    """A null vector δp has member/lead units; a visible combination lead/member units."""
+    puma = cc.load_robot("puma560")
+    obs = cc.observability(puma, cc.poses.seed_schedule(puma, 100), "all")
+    spot = next(s for s in obs.blind_spots if set(s.members) == {"theta3", "a3", "d4"})
+    assert spot.blind == ("theta3 + 0.4318 m/rad·a3 - 0.0203 m/rad·d4",)
+    # check the direction numerically: J · (1 rad, 0.4318 m, -0.0203 m) vanishes
+    J, _ = puma.position_jacobian(cc.poses.seed_schedule(puma, 100), ["theta3", "a3", "d4"])
+    assert np.abs(J @ np.array([1.0, 0.4318, -0.0203])).max() < 1e-4 * np.abs(J).max()
+    scorbot = cc.load_robot("scorbot")
+    obs = cc.observability(scorbot, cc.poses.uniform(scorbot, 50, seed=0))
+    spot = next(s for s in obs.blind_spots if set(s.members) == {"theta4", "a4"})
+    assert spot.visible.startswith("theta4 + 6.891 rad/m·a4")
+    assert spot.visible_as("a4").startswith("a4 + 0.1451 m/rad·theta4")
+
+
+def test_ill_posed_pose_set_is_flagged_not_silently_identified():
+    """The paper's schedule at 10 poses sweeps only 9°: with noise the estimates are
+    metres off, and the result must say so."""
+    robot = cc.load_robot("scorbot")
+    meas = cc.simulate(robot, cc.poses.seed_schedule(robot, 10), noise=0.01e-3, seed=1)
+    cal = cc.identify(robot, meas, None, "gauss-newton")
+    assert {"d2", "theta4"} <= set(cal.estimated)  # first member of each blind group
+    assert cal.poorly_determined
+    assert "poorly determined" in str(cal.summary())
+    status = cal.table.set_index("parameter").status
+    assert all("poorly determined" in status[n] for n in cal.poorly_determined)
+
+
+@pytest.mark.parametrize(
+    ("call", "needle"),
+    [
+        (lambda r, m: cc.identify(r, m, []), "no parameters"),
+        (lambda r, m: cc.identify(r, m, 5), "not understood"),
+        (lambda r, m: cc.identify(r, m, ["theta5"], "lm"), "none of the asked-for"),
+        (lambda r, m: cc.identify(r, m, method="ipopt", bounds={"a2": 1e-3}), "bounds"),
+        (lambda r, m: cc.identify(r, m, method="ipopt", bounds={"a2": (1, -1)}), "lower"),
+        (lambda r, m: cc.identify(r, m, method="ipopt", noise=1e-5, prior={"a2": 0.0}), "> 0"),
+        (lambda r, m: cc.identify(r, m, method="ipopt", noise=1e-5, prior={"a2": -1}), "> 0"),
+        (lambda r, m: cc.identify(r, m, max_iterations=0), "max_iterations"),
+        (lambda r, m: cc.identify(r, m, noise=[1e-5, 2e-5]), "does not fit"),
+        (lambda r, m: cc.simulate(r, m.q, noise="0.01mm"), "does not fit"),
+        (lambda r, m: r.with_deviations({"a2": "x"}), "not a number"),
+        (lambda r, m: r.with_deviations({"a2": None}), "not a number"),
+        (lambda r, m: r.fk(np.zeros((0, 5))), "N >= 1"),
+        (lambda r, m: cc.Measurements(np.zeros((0, 5)), np.zeros((0, 3)), 0.0), "N >= 1"),
+        (lambda r, m: cc.Measurements(np.full((2, 5), np.nan), np.zeros((2, 3)), 0.0), "finite"),
+    ],
+)
+def test_user_mistakes_raise_calibration_error(call, needle):
+    robot = cc.load_robot("scorbot")
+    meas = cc.simulate(robot, cc.poses.uniform(robot, 30, seed=0))
+    with pytest.raises(cc.CalibrationError) as info:
+        call(robot, meas)
+    assert needle in str(info.value)
+
+
+def test_csv_sigma_columns_in_micrometres_and_unrelated_sigma_columns(tmp_path):
+    robot = cc.load_robot("rr")
+    path = tmp_path / "m.csv"
+    path.write_text("q1,q2,x_um,y_um,z_um,sigma_um,sigma_note\n0.1,0.2,1.9e6,3e5,0,20,laser\n")
+    meas = read_csv(path, robot)
+    np.testing.assert_allclose(meas.positions, [[1.9, 0.3, 0.0]])
+    np.testing.assert_allclose(meas.sigma, np.full((1, 3), 20e-6))
+
+
+def test_cli_output_folders(tmp_path, capsys):
+    # a missing folder is created; a path through a file is one line and exit 2
+    target = tmp_path / "new" / "x.csv"
+    assert main(["simulate", "scorbot", "--poses", "5", "-o", str(target)]) == 0
+    assert target.is_file()
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    code = main(["simulate", "scorbot", "--poses", "5", "-o", str(blocked / "x.csv")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("casecal: error:") and err.count("\n") == 1
