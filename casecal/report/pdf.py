@@ -70,6 +70,9 @@ def _table_page(pdf: PdfPages, number: int, tab: Table, max_rows: int = 30) -> N
     t.set_fontsize(7.5)
     t.auto_set_column_width(list(range(len(df.columns))))
     t.scale(1.0, 1.5)
+    for (row, col), cell in t.get_celld().items():
+        if row > 0 and isinstance(df.iloc[row - 1, col], str):
+            cell._loc = "left"  # text reads from the left; numbers align on the right
     _caption(fig, tab.caption, 0.28, width=150)
     pdf.savefig(fig)
     plt.close(fig)
@@ -78,7 +81,7 @@ def _table_page(pdf: PdfPages, number: int, tab: Table, max_rows: int = 30) -> N
 def _cell(v) -> str:
     if isinstance(v, float):
         if v == 0 or 1e-3 <= abs(v) < 1e4:
-            return f"{v:.4f}"
+            return f"{v:.6f}"
         return f"{v:.3e}"
     return str(v)
 

@@ -1,0 +1,56 @@
+"""The report: every study runs, writes its files, and the numbers in them make sense."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+
+from casecal.report import PDF_TABLES, run_studies, study_runner
+from casecal.report.pdf import write_pdf
+from casecal.report.studies_paper import PAPER_TABLE1
+
+
+def test_quick_report(tmp_path):
+    results = run_studies(
+        ["table1", "planar_arms", "scara", "pose_count", "noise", "six_axis"],
+        tmp_path,
+        quick=True,
+        run=study_runner("serial", progress=False),
+    )
+    n = write_pdf(tmp_path / "r.pdf", "test", ["settings"], results, PDF_TABLES)
+    assert n >= 8
+    pdf = (tmp_path / "r.pdf").read_bytes()
+    pages = len(re.findall(rb"/Type\s*/Page[^s]", pdf))
+    assert pages == 1 + n + len(PDF_TABLES)  # title, one page per figure and per table
+    for study in results:
+        for fig in study.figures:
+            assert fig.path.is_file() and fig.path.stat().st_size > 10_000
+            assert "nan" not in fig.caption.lower(), fig.caption
+        for tab in study.tables:
+            assert tab.path.is_file()
+
+    # Table 1: one shot at least as good as the paper, iterated exact, all nine rows
+    t1 = pd.read_csv(tmp_path / "table1.csv")
+    assert len(t1) == len(PAPER_TABLE1)
+    assert t1["one-shot 100 error %"].abs().max() < 0.1813
+    assert t1["iterated 100 error %"].abs().max() < 1e-6
+    np.testing.assert_allclose(t1["synthetic"], [v[0] for v in PAPER_TABLE1.values()])
+
+    # pose count: with uniform poses the iterated error falls as poses grow
+    pc = pd.read_csv(tmp_path / "pose_count_trials.csv")
+    uni = pc[(pc.schedule == "uniform") & (pc.method == "gauss-newton")]
+    for _, g in uni.groupby("robot"):
+        med = g.groupby("n_poses")["rms_holdout_mm"].median()
+        assert med.is_monotonic_decreasing, med
+
+    # six-axis: Hayati's beta beats standard DH at the largest pose count, on both robots
+    six = pd.read_csv(tmp_path / "six_axis_trials.csv")
+    big = (
+        six[six.n_poses == six.n_poses.max()].groupby(["robot", "model"])["rms_holdout_mm"].median()
+    )
+    for robot in ("kr15_2", "rx90b"):
+        with_beta = big[robot][big[robot].index.str.contains("β")].iloc[0]
+        standard = big[robot][big[robot].index.str.startswith("standard")].iloc[0]
+        assert with_beta < 0.5 * standard
