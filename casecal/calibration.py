@@ -36,6 +36,14 @@ def display_unit(name: str) -> tuple[str, float]:
     return ("mm", 1e3) if is_length(name) else ("deg", 180.0 / math.pi)
 
 
+def _rms(residuals: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))))
+
+
+def _max(residuals: np.ndarray) -> float:
+    return float(np.max(np.linalg.norm(residuals, axis=1)))
+
+
 @dataclass(frozen=True)
 class Calibration:
     """Identified parameter deviations, their uncertainty, and how the fit went.
@@ -120,22 +128,22 @@ class Calibration:
     @property
     def rms(self) -> float:
         """RMS position error after calibration, m: ``sqrt(mean |r_i|²)``."""
-        return float(np.sqrt(np.mean(np.sum(self.residuals**2, axis=1))))
+        return _rms(self.residuals)
 
     @property
     def max_error(self) -> float:
         """Largest position error after calibration, m."""
-        return float(np.max(np.linalg.norm(self.residuals, axis=1)))
+        return _max(self.residuals)
 
     @property
     def rms_before(self) -> float:
         """RMS position error of the nominal robot, m."""
-        return float(np.sqrt(np.mean(np.sum(self.residuals_before**2, axis=1))))
+        return _rms(self.residuals_before)
 
     @property
     def max_error_before(self) -> float:
         """Largest position error of the nominal robot, m."""
-        return float(np.max(np.linalg.norm(self.residuals_before, axis=1)))
+        return _max(self.residuals_before)
 
     @property
     def poorly_determined(self) -> tuple[str, ...]:

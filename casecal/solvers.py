@@ -147,12 +147,16 @@ def _floor(problem: Problem) -> float:
     return 0.5 * np.sum((4 * eps * np.abs(problem.y).max() * problem.w_flat) ** 2)
 
 
-def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, **_):
+def _start(problem: Problem, x0):
+    """Shared start of the iterated solvers: x, residual, cost, history, floor."""
     x = x0.copy()
     r = problem.residual(x)
     cost = 0.5 * r @ r
-    history = [cost]
-    floor = _floor(problem)
+    return x, r, cost, [cost], _floor(problem)
+
+
+def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, **_):
+    x, r, cost, history, floor = _start(problem, x0)
     for it in range(1, max_iterations + 1):
         J = problem.jacobian(x)
         step = svd_solve(J, r)
@@ -181,11 +185,7 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, **_):
 
 
 def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, **_):
-    x = x0.copy()
-    r = problem.residual(x)
-    cost = 0.5 * r @ r
-    history = [cost]
-    floor = _floor(problem)
+    x, r, cost, history, floor = _start(problem, x0)
     J = problem.jacobian(x)
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
