@@ -103,6 +103,7 @@ class Calibration:
     sigma_known: bool
     truth: dict | None = None
     wall_time: float = field(default=0.0, compare=False)
+    start_note: str = ""
 
     @property
     def success(self) -> bool:
@@ -197,7 +198,7 @@ class Calibration:
             u, f = display_unit(name)
             dev, se = self.deviations[name], self.standard_errors[name]
             if name not in self.estimated:
-                status = "held at nominal: unidentifiable"
+                status = "held: unidentifiable" + ("" if dev == 0 else " (at its start value)")
             elif name in combos:
                 spot = combos[name]
                 meaning = spot.visible_as(name)

@@ -305,7 +305,7 @@ def _expression(coeffs: np.ndarray, members, direction: bool = False) -> str:
         sign = "-" if c < 0 else "+"
         mag = abs(c)
         u = unit(name)
-        if np.isclose(mag, 1.0, rtol=1e-6) and u == ref_unit:
+        if np.isclose(mag, 1.0, rtol=1e-3) and u == ref_unit:
             term = name
         else:
             scale = (

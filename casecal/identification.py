@@ -21,6 +21,7 @@ import numpy as np
 
 from .calibration import STATUS_MESSAGES, Calibration
 from .errors import CalibrationError
+from .frames import rigid_fit, rpy_from_matrix
 from .identifiability import analyse, selection
 from .measurements import Measurements, broadcast_sigma
 from .robot import Robot
@@ -124,32 +125,22 @@ def identify(
             "measurements with sigma"
         )
 
-    full = Problem(robot, q, y, w, names)
-    obs = _nominal_analysis(full)
-    estimated = obs.base_parameters
-    if obs.rank >= 3 * q.shape[0] and len(names) > obs.rank:
-        # the data, not the robot's structure, limit what can be seen
-        raise CalibrationError(
-            f"{q.shape[0]} poses give {3 * q.shape[0]} coordinates, fewer than the "
-            f"{len(names)} parameters asked for, so they cannot tell which are blind; "
-            f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
-        )
-    if not estimated:
-        raise CalibrationError(
-            f"none of the asked-for parameters ({', '.join(names)}) moves the measured point at "
-            "these poses; ask for others or measure other poses"
-        )
-    problem = full.restricted(estimated)
-    x0 = np.zeros(len(estimated))
+    start, note = _starting_robot(robot, q, y, w, names)
     solver = SOLVERS[method]
     kwargs = {"max_iterations": max_iterations, "tolerance": tolerance}
     if method == "ipopt":
         kwargs.update(bounds=bounds, prior=prior)
-    x, iterations, status, history, message = solver(problem, x0, **kwargs)
+    obs, estimated = _analyse(Problem(start, q, y, w, names), q.shape[0])
+    problem = Problem(start, q, y, w, names).restricted(estimated)
+    x, iterations, status, history, message = solver(problem, np.zeros(len(estimated)), **kwargs)
+    start = start.with_deviations(dict(zip(estimated, x.tolist(), strict=True)))
+    problem = Problem(start, q, y, w, names).restricted(estimated)
+    x = np.zeros(len(estimated))
 
-    deviations = dict.fromkeys(names, 0.0)
-    deviations.update(zip(estimated, x.tolist(), strict=True))
-    calibrated = robot.with_deviations({n: deviations[n] for n in estimated})
+    # deviations are from the user's nominal robot; held parameters keep their start value
+    p_nominal, p_final = robot.parameters, start.parameters
+    deviations = {n: p_final[n] - p_nominal[n] for n in names}
+    calibrated = start
     r_after = problem.residual(x)
     J = problem.jacobian(x)
     prior_w = np.array([1.0 / prior[n] if n in prior else 0.0 for n in estimated])
@@ -166,7 +157,7 @@ def identify(
         standard_errors=se,
         covariance=cov,
         residuals=(r_after / w.ravel()).reshape(-1, 3),
-        residuals_before=(full.residual(np.zeros(len(names))) / w.ravel()).reshape(-1, 3),
+        residuals_before=y - robot.position(q),
         iterations=iterations,
         status=status,
         message=message or STATUS_MESSAGES[status],
@@ -174,8 +165,83 @@ def identify(
         observability=obs,
         sigma_known=known,
         wall_time=time.perf_counter() - t_start,
+        start_note=note,
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+def _prefit_frames(start: Robot, q, y, w, names) -> Robot:
+    """Fit the base and tool frames alone before everything else.
+
+    With the tool offset still at zero the measured point lies on the wrist's axes, and the
+    wrist's twists look blind; fitting the (well-conditioned) frames first puts the
+    linearisation where the whole identification can see what it should.
+    """
+    frames = [n for n in names if n.startswith(("base_", "tool_"))]
+    try:
+        _, est = _analyse(Problem(start, q, y, w, frames), q.shape[0])
+    except CalibrationError:
+        return start
+    x, *_ = SOLVERS["gauss-newton"](
+        Problem(start, q, y, w, frames).restricted(est),
+        np.zeros(len(est)),
+        max_iterations=50,
+        tolerance=1e-10,
+    )
+    return start.with_deviations(dict(zip(est, x.tolist(), strict=True)))
+
+
+def _starting_robot(robot: Robot, q, y, w, names) -> tuple[Robot, str]:
+    """Where to linearise: the nominal robot, or with a base frame from a rigid fit.
+
+    When base parameters are to be identified, the measured points may be in a far-away,
+    turned instrument frame. A rigid fit of the nominal positions to the measured ones
+    (`casecal.frames.rigid_fit`) gives a base frame close enough for Gauss-Newton, whatever
+    the offset and angle; it is kept only if it lowers the residual.
+    """
+    base = [n for n in names if n.startswith("base_")]
+    if not base:
+        return robot, ""
+    model = robot.position(q)
+    R, t = rigid_fit(model, y, weights=np.mean(w**2, axis=1))
+    fit = np.eye(4)
+    fit[:3, :3], fit[:3, 3] = R, t
+    T = fit @ robot.base.matrix()
+    values = dict(zip(("base_x", "base_y", "base_z"), T[:3, 3].tolist(), strict=True))
+    values.update(zip(("base_rx", "base_ry", "base_rz"), rpy_from_matrix(T[:3, :3]), strict=True))
+    start = robot.with_parameters({n: values[n] for n in base})
+    before = np.sum(((y - model) * w) ** 2)
+    after = np.sum(((y - start.position(q)) * w) ** 2)
+    if not after < before:
+        return robot, ""
+    start = _prefit_frames(start, q, y, w, names)
+    moved = np.linalg.norm(T[:3, 3] - robot.base.matrix()[:3, 3])
+    angle = np.degrees(np.arccos(np.clip((np.trace(fit[:3, :3]) - 1) / 2, -1.0, 1.0)))
+    return start, (
+        f"The base frame started from a rigid fit of the nominal positions to the measured "
+        f"ones ({moved * 1e3:.1f} mm and {angle:.2f}° from the nominal base), then base and "
+        "tool were fitted alone before all parameters; frame parameters the data cannot "
+        "separate are held at that start."
+    )
+
+
+def _analyse(full: Problem, n_poses: int):
+    """Identifiability at `full`'s robot, and the base set to estimate (checked)."""
+    obs = _nominal_analysis(full)
+    names = full.names
+    if obs.rank >= 3 * n_poses and len(names) > obs.rank:
+        # the data, not the robot's structure, limit what can be seen
+        raise CalibrationError(
+            f"{n_poses} poses give {3 * n_poses} coordinates, fewer than the "
+            f"{len(names)} parameters asked for, so they cannot tell which are blind; "
+            f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
+        )
+    if not obs.base_parameters:
+        raise CalibrationError(
+            f"none of the asked-for parameters ({', '.join(names)}) moves the measured point at "
+            "these poses; ask for others or measure other poses"
+        )
+    return obs, obs.base_parameters
 
 
 _NOMINAL: OrderedDict = OrderedDict()

@@ -52,7 +52,7 @@ def format_table(df: pd.DataFrame) -> str:
 
 def _short_status(status: str) -> str:
     if status.startswith("held"):
-        return "held at nominal"
+        return "held at nominal" if status.endswith("unidentifiable") else "held at start"
     if status == "poorly determined":
         return "POORLY DETERMINED"
     if status.startswith("stands for"):
@@ -85,8 +85,9 @@ def build_summary(cal: Calibration) -> Summary:
     header = "\n".join([rule, title, rule, *body, f"Message: {cal.message}"])
     s = obs.singular_values
     diag = [
-        f"Observability of the {len(obs.parameters)} asked-for parameters at nominal "
-        f"(column-scaled Jacobian): rank {obs.rank} of {len(obs.parameters)}",
+        f"Observability of the {len(obs.parameters)} asked-for parameters (column-scaled "
+        f"Jacobian at the {'start' if cal.start_note else 'nominal robot'}): "
+        f"rank {obs.rank} of {len(obs.parameters)}",
         "  indices of the estimated set: "
         + ", ".join(f"{k} = {v:.4g}" for k, v in obs.indices.items()),
         f"  singular values: largest {s[0]:.4g}, smallest non-zero "
@@ -104,11 +105,13 @@ def _notes(cal: Calibration) -> list[str]:
     obs = cal.observability
     if not cal.success:
         notes.append(f"The fit did not converge: {cal.message}. Do not use these values.")
+    if cal.start_note:
+        notes.append(cal.start_note)
     if obs.blind_spots:
         held = ", ".join(cal.held) if cal.held else "none"
         notes.append(
             f"The data cannot identify {len(obs.unidentifiable)} of the asked-for parameters "
-            f"individually; held at nominal: {held}."
+            f"individually; held at nominal (or at the start of the fit): {held}."
         )
         for spot in obs.blind_spots:
             notes.append(spot.text + ".")
