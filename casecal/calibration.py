@@ -68,8 +68,11 @@ class Calibration:
     covariance : ndarray, shape (len(estimated), len(estimated))
         Covariance of the estimated deviations, SI. From the stated measurement σ when
         there is one, else scaled by the residual variance ``RSS / (3N - k)``.
-    residuals, residuals_before : ndarray, shape (N, 3)
-        Measured minus modelled positions after and before calibration, m.
+    residuals, residuals_before : ndarray, shape (N · m, 3)
+        Measured minus modelled positions after and before calibration, m (one row per
+        measured point; m = 1 point per pose by default).
+    orientation_residuals : ndarray, shape (N, 3), or None
+        ``log(R_meas R_modelᵀ)`` after calibration, rad, when orientations were measured.
     iterations : int
     status : int
         See `STATUS_MESSAGES`; ``success = status > 0``.
@@ -104,6 +107,7 @@ class Calibration:
     truth: dict | None = None
     wall_time: float = field(default=0.0, compare=False)
     start_note: str = ""
+    orientation_residuals: np.ndarray | None = None
 
     @property
     def success(self) -> bool:
@@ -124,7 +128,7 @@ class Calibration:
     @property
     def n_poses(self) -> int:
         """Number of poses N."""
-        return self.residuals.shape[0]
+        return self.observability.n_poses
 
     @property
     def rms(self) -> float:
@@ -155,8 +159,11 @@ class Calibration:
 
     @property
     def dof_residual(self) -> int:
-        """Residual degrees of freedom, 3N − k."""
-        return 3 * self.n_poses - len(self.estimated)
+        """Residual degrees of freedom: measured coordinates − k."""
+        rows = self.residuals.size + (
+            0 if self.orientation_residuals is None else self.orientation_residuals.size
+        )
+        return rows - len(self.estimated)
 
     def compare_to(self, truth: dict) -> Calibration:
         """The same result with the true deviations (SI) known: `table` gains error columns."""

@@ -20,8 +20,10 @@ A robot file is TOML::
     [tool]                     # optional, same form
     xyz = [0.0, 0.0, 0.1]
 
-``full_name``, ``variant``, ``source`` (list of strings) and ``confidence`` are optional
-descriptions. Every mistake raises `CalibrationError` naming the file, the key and the fix.
+``points = [[x, y, z], …]`` (top level, length_unit) lists measured points (reflectors) in the
+tool frame; without it the tool frame's origin is the measured point. ``full_name``,
+``variant``, ``source`` (list of strings) and ``confidence`` are optional descriptions.
+Every mistake raises `CalibrationError` naming the file, the key and the fix.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from .robot import Frame, Joint, Robot
 _LENGTH = {"m": 1.0, "mm": 1e-3}
 _ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
 _TOP_KEYS = {
+    "points",
     "name",
     "convention",
     "length_unit",
@@ -167,8 +170,16 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
         raise CalibrationError(f"{label}: name must be a non-empty string")
     source = data.get("source", ())
     source = (source,) if isinstance(source, str) else tuple(str(s) for s in source)
+    points = data.get("points", [])
+    if not isinstance(points, list) or not all(isinstance(p, list) and len(p) == 3 for p in points):
+        raise CalibrationError(
+            f"{label}: points must be a list of [x, y, z] in the tool frame, e.g. "
+            "points = [[0.0, 0.0, 0.1]]"
+        )
+    points = tuple(tuple(_number(v, label, "points") * length for v in p) for p in points)
     return Robot(
         name=name,
+        points=points,
         joints=tuple(joints),
         convention=convention,
         base=_frame(data, "base", length, angle, label),
@@ -252,6 +263,9 @@ def robot_to_toml(robot: Robot) -> str:
             lines.append(f"beta = {j.beta!r}")
         if j.limits is not None:
             lines.append(f"limits = [{j.limits[0]!r}, {j.limits[1]!r}]")
+    if robot.points:
+        rows = ", ".join("[" + ", ".join(repr(float(v)) for v in p) + "]" for p in robot.points)
+        lines.insert(lines.index('angle_unit = "rad"') + 1, f"points = [{rows}]")
     for key, frame in (("base", robot.base), ("tool", robot.tool)):
         lines += [
             "",

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import OrderedDict
+from functools import partial
 
 import numpy as np
 
@@ -44,6 +45,7 @@ def identify(
     max_iterations: int = 100,
     tolerance: float = 1e-10,
     truth: dict | None = None,
+    orientation_sigma: float | None = None,
 ) -> Calibration:
     """Identify the parameter deviations of `robot` from measured positions.
 
@@ -79,6 +81,9 @@ def identify(
         Relative step tolerance of the iterated methods. Default 1e-10.
     truth : dict, optional
         True deviations (SI), for simulations: the result's table then shows errors.
+    orientation_sigma : float, optional
+        σ of measured orientations, rad (default: the measurements'; without one, 1 mrad
+        of rotation weighs like 0.1 mm of position).
 
     Returns
     -------
@@ -110,7 +115,9 @@ def identify(
             f"measurements have {measurements.q.shape[1]} joint values per pose but robot "
             f"{robot.name!r} has {robot.dof} joints; use the robot the data came from"
         )
-    q, y = measurements.q, measurements.positions
+    q, y = measurements.q, measurements.points  # y: (N, m, 3)
+    robot, point_note = _with_points(robot, measurements.n_points)
+    names = selection(robot, parameters) if point_note else names
     sigma = measurements.sigma if noise is None else broadcast_sigma(noise, q.shape[0])
     known = bool(np.all(sigma > 0))
     if not known and np.any(sigma > 0):
@@ -118,23 +125,32 @@ def identify(
             "noise sigma is zero for some coordinates and not others; give every coordinate "
             "its sigma (> 0), or none (0 everywhere) to weigh all alike"
         )
-    w = 1.0 / sigma if known else np.ones_like(y)
+    w = 1.0 / sigma if known else np.ones_like(sigma)
+    R_meas = measurements.orientations
+    if orientation_sigma is None:
+        orientation_sigma = measurements.orientation_sigma
+    if orientation_sigma:
+        w_rot = 1.0 / orientation_sigma
+    else:  # stated default: 1 mrad weighs like 0.1 mm
+        w_rot = 0.1 * float(np.mean(w))
+    make = partial(Problem, q=q, y=y, w=w, orientations=R_meas, w_rot=w_rot)
     if prior and not known:
         raise CalibrationError(
             "a prior needs the measurement sigma to weigh against; give noise=... (m) or "
             "measurements with sigma"
         )
 
-    start, note = _starting_robot(robot, q, y, w, names)
+    start, note = _starting_robot(robot, make, names)
+    note = " ".join(t for t in (point_note, note) if t)
     solver = SOLVERS[method]
     kwargs = {"max_iterations": max_iterations, "tolerance": tolerance}
     if method == "ipopt":
         kwargs.update(bounds=bounds, prior=prior)
-    obs, estimated = _analyse(Problem(start, q, y, w, names), q.shape[0])
-    problem = Problem(start, q, y, w, names).restricted(estimated)
+    obs, estimated = _analyse(make(start, names=names))
+    problem = make(start, names=names).restricted(estimated)
     x, iterations, status, history, message = solver(problem, np.zeros(len(estimated)), **kwargs)
     start = start.with_deviations(dict(zip(estimated, x.tolist(), strict=True)))
-    problem = Problem(start, q, y, w, names).restricted(estimated)
+    problem = make(start, names=names).restricted(estimated)
     x = np.zeros(len(estimated))
 
     # deviations are from the user's nominal robot; held parameters keep their start value
@@ -156,8 +172,9 @@ def identify(
         deviations=deviations,
         standard_errors=se,
         covariance=cov,
-        residuals=(r_after / w.ravel()).reshape(-1, 3),
-        residuals_before=y - robot.position(q),
+        residuals=problem.point_residuals(x).reshape(-1, 3),
+        residuals_before=(y - robot.measured_points(q)).reshape(-1, 3),
+        orientation_residuals=problem.orientation_residuals(x),
         iterations=iterations,
         status=status,
         message=message or STATUS_MESSAGES[status],
@@ -170,20 +187,37 @@ def identify(
     return cal.compare_to(truth) if truth is not None else cal
 
 
-def _prefit_frames(start: Robot, q, y, w, names) -> Robot:
+def _with_points(robot: Robot, m: int) -> tuple[Robot, str]:
+    """The robot with as many measured points as the data have (new ones at the origin)."""
+    if m == 1 and not robot.points:
+        return robot, ""
+    if robot.points and len(robot.points) != m:
+        raise CalibrationError(
+            f"the measurements have {m} points per pose but robot {robot.name!r} has "
+            f"{len(robot.points)}; give the robot one point per measured reflector"
+        )
+    if robot.points:
+        return robot, ""
+    return robot.with_points(np.zeros((m, 3))), (
+        f"The {m} measured points started at the tool origin (their positions on the tool "
+        "were not given) and were fitted."
+    )
+
+
+def _prefit_frames(start: Robot, make, names) -> Robot:
     """Fit the base and tool frames alone before everything else.
 
     With the tool offset still at zero the measured point lies on the wrist's axes, and the
     wrist's twists look blind; fitting the (well-conditioned) frames first puts the
     linearisation where the whole identification can see what it should.
     """
-    frames = [n for n in names if n.startswith(("base_", "tool_"))]
+    frames = [n for n in names if n.startswith(("base_", "tool_", "point"))]
     try:
-        _, est = _analyse(Problem(start, q, y, w, frames), q.shape[0])
+        _, est = _analyse(make(start, names=frames))
     except CalibrationError:
         return start
     x, *_ = SOLVERS["gauss-newton"](
-        Problem(start, q, y, w, frames).restricted(est),
+        make(start, names=frames).restricted(est),
         np.zeros(len(est)),
         max_iterations=50,
         tolerance=1e-10,
@@ -191,7 +225,7 @@ def _prefit_frames(start: Robot, q, y, w, names) -> Robot:
     return start.with_deviations(dict(zip(est, x.tolist(), strict=True)))
 
 
-def _starting_robot(robot: Robot, q, y, w, names) -> tuple[Robot, str]:
+def _starting_robot(robot: Robot, make, names) -> tuple[Robot, str]:
     """Where to linearise: the nominal robot, or with a base frame from a rigid fit.
 
     When base parameters are to be identified, the measured points may be in a far-away,
@@ -202,19 +236,21 @@ def _starting_robot(robot: Robot, q, y, w, names) -> tuple[Robot, str]:
     base = [n for n in names if n.startswith("base_")]
     if not base:
         return robot, ""
-    model = robot.position(q)
-    R, t = rigid_fit(model, y, weights=np.mean(w**2, axis=1))
+    probe = make(robot, names=base)
+    y, q, w = probe.y.reshape(-1, 3), probe.q, probe.w
+    model = robot.measured_points(q).reshape(-1, 3)
+    R, t = rigid_fit(model, y, weights=np.repeat(np.mean(w**2, axis=1), probe.m))
     fit = np.eye(4)
     fit[:3, :3], fit[:3, 3] = R, t
     T = fit @ robot.base.matrix()
     values = dict(zip(("base_x", "base_y", "base_z"), T[:3, 3].tolist(), strict=True))
     values.update(zip(("base_rx", "base_ry", "base_rz"), rpy_from_matrix(T[:3, :3]), strict=True))
     start = robot.with_parameters({n: values[n] for n in base})
-    before = np.sum(((y - model) * w) ** 2)
-    after = np.sum(((y - start.position(q)) * w) ** 2)
+    before = np.sum(probe.residual(np.zeros(len(base))) ** 2)
+    after = np.sum(make(start, names=base).residual(np.zeros(len(base))) ** 2)
     if not after < before:
         return robot, ""
-    start = _prefit_frames(start, q, y, w, names)
+    start = _prefit_frames(start, make, names)
     moved = np.linalg.norm(T[:3, 3] - robot.base.matrix()[:3, 3])
     angle = np.degrees(np.arccos(np.clip((np.trace(fit[:3, :3]) - 1) / 2, -1.0, 1.0)))
     return start, (
@@ -225,14 +261,15 @@ def _starting_robot(robot: Robot, q, y, w, names) -> tuple[Robot, str]:
     )
 
 
-def _analyse(full: Problem, n_poses: int):
+def _analyse(full: Problem):
     """Identifiability at `full`'s robot, and the base set to estimate (checked)."""
     obs = _nominal_analysis(full)
     names = full.names
-    if obs.rank >= 3 * n_poses and len(names) > obs.rank:
+    n_poses, rows = full.q.shape[0], full.w_flat.size
+    if obs.rank >= rows and len(names) > obs.rank:
         # the data, not the robot's structure, limit what can be seen
         raise CalibrationError(
-            f"{n_poses} poses give {3 * n_poses} coordinates, fewer than the "
+            f"{n_poses} poses give {rows} coordinates, fewer than the "
             f"{len(names)} parameters asked for, so they cannot tell which are blind; "
             f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
         )
@@ -255,7 +292,8 @@ def _nominal_analysis(full: Problem):
     analysis are computed once (LRU of `_NOMINAL_SIZE`) and seeded into `full`'s memo.
     """
     p0 = full.p0.tobytes()
-    key = (full.robot.structure, p0, full.q.tobytes(), full.w.tobytes(), full.names)
+    R = b"" if full.R is None else full.R.tobytes()
+    key = (full.robot.structure, p0, full.q.tobytes(), full.w_flat.tobytes(), R, full.names)
     hit = _NOMINAL.get(key)
     if hit is None:
         obs = analyse(full.jacobian(np.zeros(len(full.names))), full.names, full.q.shape[0])

@@ -56,7 +56,7 @@ PARALLEL_TOLERANCE = 0.01
 COMPILE_MIN_POSES = 200
 """Batches of at least this many poses use compiled C (when a C compiler is present)."""
 
-KINDS = ("fk", "position", "position_jacobian", "pose_jacobian")
+KINDS = ("fk", "position", "position_jacobian", "pose_jacobian", "points", "points_jacobian")
 
 
 @dataclass(frozen=True)
@@ -70,16 +70,19 @@ class Structure:
         One letter per joint, base to tip, ``"R"`` or ``"P"`` (e.g. ``"RRPR"``).
     beta_joints : tuple of int
         1-based indices of the links that carry a Hayati ``beta``.
+    n_points : int
+        Measured points on the tool (0: the tool frame's origin).
     """
 
     convention: str
     joint_types: str
     beta_joints: tuple[int, ...] = ()
+    n_points: int = 0
 
     @property
     def names(self) -> tuple[str, ...]:
         """Names of the full parameter vector (see `casecal.parameters`)."""
-        return parameter_names(len(self.joint_types), self.beta_joints)
+        return parameter_names(len(self.joint_types), self.beta_joints, self.n_points)
 
 
 def needs_beta(convention: str, index: int, n_joints: int, alpha: float) -> bool:
@@ -240,6 +243,9 @@ class Chain:
             return T.T
         if kind == "position":
             return position
+        if kind in ("points", "points_jacobian"):
+            points = self._points(T)
+            return points if kind == "points" else self._jacobian(points, columns).T
         J = self._jacobian(position, columns)
         if kind == "position_jacobian":
             return J.T
@@ -286,13 +292,27 @@ class Chain:
             evaluator = self._evaluators[key] = _Evaluator(self, kind, key[1])
         return evaluator(q, self.extended(p))
 
+    def _points(self, T) -> ca.SX:
+        """Stacked world positions (3m) of the measured points ``T · [p_k; 1]``."""
+        m = self.structure.n_points
+        if m == 0:
+            return T[:3, 3]
+        p = self.graph[1]
+        first = self.index["point1_x"]
+        return ca.vertcat(
+            *[T[:3, :3] @ p[first + 3 * j : first + 3 * j + 3] + T[:3, 3] for j in range(m)]
+        )
+
     def output_shape(self, kind: str, k: int) -> tuple[int, ...]:
         """Per-pose output shape of `kind` with `k` parameter columns (C order)."""
+        m3 = 3 * max(self.structure.n_points, 1)
         return {
             "fk": (4, 4),
             "position": (3,),
             "position_jacobian": (3, k),
             "pose_jacobian": (6, k),
+            "points": (m3,),
+            "points_jacobian": (m3, k),
         }[kind]
 
 

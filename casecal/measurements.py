@@ -33,42 +33,61 @@ def broadcast_sigma(sigma, n: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Measurements:
-    """Joint readings and the measured tool-point positions at those poses.
+    """Joint readings and what was measured at those poses.
 
     Attributes
     ----------
     q : ndarray, shape (N, dof)
         Joint values, rad (R) or m (P).
-    positions : ndarray, shape (N, 3)
-        Measured tool-point positions in the world frame, m.
+    positions : ndarray, shape (N, 3) or (N, m, 3)
+        Measured positions in the world (instrument) frame, m: one point per pose, or m
+        points (reflectors) per pose in the order of the robot's ``points``.
     sigma : ndarray, shape (N, 3)
-        Standard deviation of the measurement noise of each coordinate, m; a scalar or
-        (3,) per-axis value given to the constructor is broadcast. Zero means noise-free
+        Standard deviation of the position noise per pose and axis, m (every point of a
+        pose shares it); a scalar, (3,) or (N,) value is broadcast. Zero means noise-free
         (simulated) data or unknown noise.
-    kind : str
-        ``"position"``.
+    orientations : ndarray, shape (N, 3, 3), optional
+        Measured rotation of the tool frame in the world frame (from unit quaternions).
+    orientation_sigma : float, optional
+        Standard deviation of the orientation noise, rad.
     """
 
     q: np.ndarray
     positions: np.ndarray
     sigma: np.ndarray
-    kind: str = "position"
+    orientations: np.ndarray | None = None
+    orientation_sigma: float | None = None
 
     def __post_init__(self) -> None:
         q, _ = check_joint_values(self.q, np.shape(self.q)[-1] if np.ndim(self.q) else 0)
         try:
-            y = np.atleast_2d(np.asarray(self.positions, dtype=float))
+            y = np.asarray(self.positions, dtype=float)
         except (TypeError, ValueError):
             raise CalibrationError("measured positions are not numbers") from None
-        if y.shape != (q.shape[0], 3):
+        if y.ndim == 1:
+            y = y[None, :]
+        if y.shape[0] != q.shape[0] or y.shape[-1] != 3 or y.ndim not in (2, 3) or y.size == 0:
             raise CalibrationError(
-                f"measured positions have shape {y.shape}; expected ({q.shape[0]}, 3), "
-                "one x, y, z row per pose"
+                f"measured positions have shape {y.shape}; expected ({q.shape[0]}, 3) for one "
+                f"point per pose or ({q.shape[0]}, m, 3) for m points"
             )
         if not np.all(np.isfinite(y)):
             raise CalibrationError("measured positions contain NaN or inf; remove those rows")
         sigma = broadcast_sigma(self.sigma, q.shape[0])
-        for name, value in (("q", q), ("positions", y), ("sigma", sigma)):
+        values = [("q", q), ("positions", y), ("sigma", sigma)]
+        if self.orientations is not None:
+            R = np.asarray(self.orientations, dtype=float)
+            if R.shape != (q.shape[0], 3, 3) or not np.all(np.isfinite(R)):
+                raise CalibrationError(f"orientations must be ({q.shape[0]}, 3, 3) rotations")
+            if np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max() > 1e-6:
+                raise CalibrationError("orientations are not rotation matrices (R Rᵀ != I)")
+            values.append(("orientations", R))
+        if self.orientation_sigma is not None:
+            sd = float(self.orientation_sigma)
+            if not (np.isfinite(sd) and sd >= 0):
+                raise CalibrationError("orientation sigma must be finite and non-negative (rad)")
+            object.__setattr__(self, "orientation_sigma", sd)
+        for name, value in values:
             value.setflags(write=False)
             object.__setattr__(self, name, value)
 
@@ -77,9 +96,51 @@ class Measurements:
         """Number of poses N."""
         return self.q.shape[0]
 
+    @property
+    def points(self) -> np.ndarray:
+        """Measured positions as (N, m, 3), m."""
+        return self.positions.reshape(self.n_poses, -1, 3)
 
-def simulate(true_robot: Robot, q, noise=0.0, seed=None) -> Measurements:
-    """Position measurements of `true_robot` at poses `q`, with isotropic Gaussian noise.
+    @property
+    def n_points(self) -> int:
+        """Measured points per pose, m."""
+        return self.points.shape[1]
+
+
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """``vee(log(R))`` for rotations R (..., 3, 3): axis times angle, rad, shape (..., 3)."""
+    R = np.asarray(R, dtype=float)
+    cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)
+    angle = np.arccos(cos)
+    w = np.stack(
+        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
+        axis=-1,
+    )
+    s = np.sin(angle)
+    # angle / (2 sin angle) -> 1/2 as angle -> 0; near pi the residuals of a fit are small
+    factor = np.where(s > 1e-8, angle / np.where(s > 1e-8, 2 * s, 1.0), 0.5)
+    return w * factor[..., None]
+
+
+def rotation_from_vector(w: np.ndarray) -> np.ndarray:
+    """``exp([w]×)`` (Rodrigues) for rotation vectors w (..., 3), rad."""
+    w = np.asarray(w, dtype=float)
+    angle = np.linalg.norm(w, axis=-1)[..., None, None]
+    K = np.zeros((*w.shape[:-1], 3, 3))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
+    K = K - np.swapaxes(K, -1, -2)
+    safe = np.where(angle > 1e-12, angle, 1.0)
+    A = np.where(angle > 1e-12, np.sin(angle) / safe, 1.0)
+    B = np.where(angle > 1e-12, (1 - np.cos(angle)) / safe**2, 0.5)
+    return np.eye(3) + A * K + B * (K @ K)
+
+
+def simulate(true_robot: Robot, q, noise=0.0, seed=None, orientation_noise=None) -> Measurements:
+    """Measurements of `true_robot` at poses `q`, with isotropic Gaussian noise.
+
+    Measures the robot's ``points`` (or the tool origin when it has none); with
+    `orientation_noise` (rad, may be 0) also the tool frame's rotation, perturbed by a
+    random rotation vector of that standard deviation per axis.
 
     Parameters
     ----------
@@ -99,7 +160,16 @@ def simulate(true_robot: Robot, q, noise=0.0, seed=None) -> Measurements:
     """
     q2, _ = check_joint_values(q, true_robot.dof)
     sigma = broadcast_sigma(noise, q2.shape[0])
-    positions = true_robot.position(q2)
+    rng = np.random.default_rng(seed)
+    points = true_robot.measured_points(q2)  # (N, m, 3)
     if np.any(sigma > 0):
-        positions = positions + np.random.default_rng(seed).normal(size=positions.shape) * sigma
-    return Measurements(q=q2, positions=positions, sigma=sigma)
+        points = points + rng.normal(size=points.shape) * sigma[:, None, :]
+    positions = points if true_robot.points else points[:, 0, :]
+    R = None
+    if orientation_noise is not None:
+        R = true_robot.fk(q2)[:, :3, :3]
+        if orientation_noise > 0:
+            R = rotation_from_vector(rng.normal(scale=orientation_noise, size=(len(q2), 3))) @ R
+    return Measurements(
+        q=q2, positions=positions, sigma=sigma, orientations=R, orientation_sigma=orientation_noise
+    )

@@ -30,7 +30,9 @@ def frame_names(frame: str) -> tuple[str, ...]:
     return tuple(f"{frame}_{axis}" for axis in FRAME_AXES)
 
 
-def parameter_names(n_joints: int, beta_joints: Iterable[int]) -> tuple[str, ...]:
+def parameter_names(
+    n_joints: int, beta_joints: Iterable[int], n_points: int = 0
+) -> tuple[str, ...]:
     """Names of the full parameter vector, in canonical order.
 
     Parameters
@@ -39,10 +41,13 @@ def parameter_names(n_joints: int, beta_joints: Iterable[int]) -> tuple[str, ...
         Number of joints.
     beta_joints : iterable of int
         1-based indices of the links that carry a Hayati ``beta``.
+    n_points : int
+        Measured points (reflectors) on the tool, each ``point{k}_x/y/z`` in the tool
+        frame (m); 0 means the tool frame's origin is the one measured point.
 
     Returns
     -------
-    tuple of str, length ``4 * n_joints + len(beta_joints) + 12``
+    tuple of str, length ``4 * n_joints + len(beta_joints) + 12 + 3 * n_points``
     """
     betas = set(beta_joints)
     names: list[str] = []
@@ -50,7 +55,8 @@ def parameter_names(n_joints: int, beta_joints: Iterable[int]) -> tuple[str, ...
         names += [f"theta{i}", f"d{i}", f"a{i}", f"alpha{i}"]
         if i in betas:
             names.append(f"beta{i}")
-    return (*names, *frame_names("base"), *frame_names("tool"))
+    points = [f"point{k}_{a}" for k in range(1, n_points + 1) for a in "xyz"]
+    return (*names, *frame_names("base"), *frame_names("tool"), *points)
 
 
 def is_length(name: str) -> bool:
@@ -132,4 +138,6 @@ def _match(names: Sequence[str], token: str) -> list[str]:
         return [n for n in names if (m := _JOINT_RE.match(n)) and m.group(1) == family]
     if family.rstrip("_") in ("base", "tool"):
         return [n for n in names if n.startswith(family.rstrip("_") + "_")]
+    if family.rstrip("_") == "point":
+        return [n for n in names if n.startswith("point")]
     return [n for n in names if fnmatch.fnmatchcase(n, token)]

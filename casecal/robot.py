@@ -80,6 +80,9 @@ class Robot:
         World-to-first-frame and flange-to-tool-point transforms.
     full_name, source, confidence : str, tuple of str, str
         Where the numbers come from and how sure that source is.
+    points : tuple of (x, y, z)
+        Measured points (reflectors) in the tool frame, m; empty: the tool frame's origin
+        is what is measured. Each adds parameters ``point{k}_x/y/z``.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.kinematics`). Default True.
@@ -93,6 +96,7 @@ class Robot:
     full_name: str = ""
     source: tuple[str, ...] = ()
     confidence: str = ""
+    points: tuple[tuple[float, float, float], ...] = ()
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
@@ -123,6 +127,10 @@ class Robot:
             )
         object.__setattr__(self, "joints", joints)
         object.__setattr__(self, "source", tuple(self.source))
+        points = tuple(tuple(float(v) for v in p) for p in self.points)
+        if any(len(p) != 3 or not all(math.isfinite(v) for v in p) for p in points):
+            raise CalibrationError(f"robot {self.name!r}: every point needs 3 finite numbers (m)")
+        object.__setattr__(self, "points", points)
 
     # --- description ------------------------------------------------------------------
 
@@ -140,7 +148,7 @@ class Robot:
     def structure(self) -> kinematics.Structure:
         """What the CasADi graph depends on (everything but the numbers)."""
         betas = tuple(i for i, j in enumerate(self.joints, start=1) if j.beta is not None)
-        return kinematics.Structure(self.convention, self.joint_types, betas)
+        return kinematics.Structure(self.convention, self.joint_types, betas, len(self.points))
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -160,6 +168,7 @@ class Robot:
             if j.beta is not None:
                 values.append(j.beta)
         values += [*self.base.xyz, *self.base.rpy, *self.tool.xyz, *self.tool.rpy]
+        values += [v for p in self.points for v in p]
         return np.array(values, dtype=float)
 
     @property
@@ -220,8 +229,22 @@ class Robot:
             v = [p[f"{prefix}_{axis}"] for axis in FRAME_AXES]
             return Frame(tuple(v[:3]), tuple(v[3:]))
 
+        points = tuple(
+            tuple(p[f"point{k}_{a}"] for a in "xyz") for k in range(1, len(self.points) + 1)
+        )
         return dataclasses.replace(
-            self, joints=tuple(joints), base=frame("base"), tool=frame("tool"), auto_beta=False
+            self,
+            joints=tuple(joints),
+            base=frame("base"),
+            tool=frame("tool"),
+            points=points,
+            auto_beta=False,
+        )
+
+    def with_points(self, points) -> Robot:
+        """A new Robot measured at `points` (tool frame, m, shape (m, 3)); () for the origin."""
+        return dataclasses.replace(
+            self, points=tuple(map(tuple, np.asarray(points, float))), auto_beta=False
         )
 
     def with_deviations(self, deviations: Mapping[str, float]) -> Robot:
@@ -266,6 +289,17 @@ class Robot:
     def position(self, q) -> np.ndarray:
         """Tool-point position, m: shape (3,) for q (dof,), (N, 3) for q (N, dof)."""
         return self._evaluate("position", q)
+
+    def measured_points(self, q) -> np.ndarray:
+        """World positions of the measured points, m.
+
+        Shape (N, m, 3) for q (N, dof), (m, 3) for one pose; with no `points` the tool
+        origin is the one point (m = 1).
+        """
+        q2, single = check_joint_values(q, self.dof)
+        ch = kinematics.chain(self.structure)
+        out = ch.evaluate("points", q2, self.vector()).reshape(q2.shape[0], -1, 3)
+        return out[0] if single else out
 
     def position_jacobian(self, q, parameters=None) -> tuple[np.ndarray, list[str]]:
         """Exact Jacobian of the tool-point position with respect to geometric parameters.

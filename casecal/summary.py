@@ -67,7 +67,7 @@ def build_summary(cal: Calibration) -> Summary:
         ("Robot:", f"{cal.nominal.name} ({cal.nominal.joint_types}, {cal.nominal.convention})"),
         ("Method:", cal.method),
         ("Status:", f"{cal.status} ({'success' if cal.success else 'FAILED'})"),
-        ("Poses:", f"{cal.n_poses} ({3 * cal.n_poses} coordinates)"),
+        ("Poses:", f"{cal.n_poses} ({cal.dof_residual + len(cal.estimated)} coordinates)"),
         ("Parameters:", f"{len(cal.parameters)} asked, {len(cal.estimated)} estimated"),
         ("Iterations:", str(cal.iterations)),
     ]

@@ -21,9 +21,17 @@ def realistic_truth(robot: cc.Robot, seed: int) -> dict[str, float]:
             truth[name] = sign * rng.uniform(0.5e-3, 1e-3)
         else:
             truth[name] = sign * np.deg2rad(rng.uniform(0.1, 0.5))
-    truth.update(base_x=2.1, base_y=-1.9, base_z=0.4, base_rx=np.deg2rad(0.4),
-                 base_ry=np.deg2rad(-0.3), base_rz=np.deg2rad(130.0),
-                 tool_x=0.03, tool_y=-0.02, tool_z=0.12)
+    truth.update(
+        base_x=2.1,
+        base_y=-1.9,
+        base_z=0.4,
+        base_rx=np.deg2rad(0.4),
+        base_ry=np.deg2rad(-0.3),
+        base_rz=np.deg2rad(130.0),
+        tool_x=0.03,
+        tool_y=-0.02,
+        tool_z=0.12,
+    )
     return truth
 
 
@@ -44,6 +52,57 @@ def test_far_turned_instrument_one_point_per_pose(name):
     assert rms < 1.1 * floor, (rms * 1e3, floor * 1e3)
     # what it removed, and why: tool orientation does not move a single measured point
     assert {"tool_rx", "tool_ry", "tool_rz"} <= set(cal.unidentifiable)
+    zero = {s.members[0] for s in cal.observability.blind_spots if "column is zero" in s.text}
+    assert {"tool_rx", "tool_ry", "tool_rz"} <= zero
     assert {"tool_rx", "tool_ry", "tool_rz"} <= set(cal.held)
     text = str(cal.summary())
     assert "rigid fit" in text and "tool_rx" in text
+
+
+def holdout_rms(cal, true, robot, orientation=False):
+    q_hold = cc.poses.uniform(robot, 200, seed=4)
+    hold = cc.simulate(true, q_hold, noise=SIGMA, seed=5)
+    model = cal.robot.measured_points(q_hold)
+    err = hold.points - model
+    return np.sqrt(np.mean(np.sum(err**2, axis=-1)))
+
+
+def test_two_reflectors_per_pose_positions_unknown():
+    robot = cc.load_robot("puma560")
+    truth = realistic_truth(robot, seed=6)
+    del truth["tool_x"], truth["tool_y"], truth["tool_z"]  # the reflectors carry the offset
+    reflectors = [[0.04, 0.0, 0.13], [-0.03, 0.02, 0.11]]
+    true = robot.with_deviations(truth).with_points(reflectors)
+    q = cc.poses.uniform(robot, 60, seed=2)
+    meas = cc.simulate(true, q, noise=SIGMA, seed=3)
+    assert meas.positions.shape == (60, 2, 3)
+    cal = cc.identify(robot, meas, "all", "gauss-newton")  # reflector positions not given
+    assert cal.success, cal.message
+    assert holdout_rms(cal, true, robot) < 1.1 * SIGMA * np.sqrt(3)
+    # the reflectors' layout is found; their coordinates only up to the tool frame's own
+    # rotation, so compare the frame-free distance between them
+    found = np.array(cal.robot.points)
+    assert np.linalg.norm(found[0] - found[1]) == pytest.approx(
+        np.linalg.norm(np.subtract(*reflectors)), abs=0.05e-3
+    )
+    # two points fix the tool's orientation except the roll about the line between them
+    assert "tool_x" in cal.unidentifiable  # redundant with the reflectors' positions
+    assert "points started at the tool origin" in str(cal.summary())
+
+
+def test_one_point_and_orientation():
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations(realistic_truth(robot, seed=7))
+    q = cc.poses.uniform(robot, 60, seed=2)
+    sigma_rot = np.deg2rad(0.005)
+    meas = cc.simulate(true, q, noise=SIGMA, seed=3, orientation_noise=sigma_rot)
+    assert meas.orientations.shape == (60, 3, 3)
+    cal = cc.identify(robot, meas, "all", "gauss-newton")
+    assert cal.success, cal.message
+    assert holdout_rms(cal, true, robot) < 1.1 * SIGMA * np.sqrt(3)
+    # with orientation measured, the tool's rotation moves what is measured (no zero
+    # columns any more); it can still share a blind group with the last joint's θ6 and α6
+    zero = {s.members[0] for s in cal.observability.blind_spots if "column is zero" in s.text}
+    assert not {"tool_rx", "tool_ry", "tool_rz"} & zero
+    rot_rms = np.sqrt(np.mean(np.sum(cal.orientation_residuals**2, axis=1)))
+    assert rot_rms < 1.2 * sigma_rot * np.sqrt(3)
