@@ -73,6 +73,10 @@ class Calibration:
         measured point; m = 1 point per pose by default).
     orientation_residuals : ndarray, shape (N, 3), or None
         ``log(R_meas R_modelᵀ)`` after calibration, rad, when orientations were measured.
+    outliers : tuple of int
+        Poses (0-based rows) whose residuals stand out (see `identify`).
+    loss : str
+        The loss that was minimised.
     iterations : int
     status : int
         See `STATUS_MESSAGES`; ``success = status > 0``.
@@ -108,6 +112,8 @@ class Calibration:
     wall_time: float = field(default=0.0, compare=False)
     start_note: str = ""
     orientation_residuals: np.ndarray | None = None
+    outliers: tuple[int, ...] = ()
+    loss: str = "linear"
 
     @property
     def success(self) -> bool:

@@ -55,3 +55,46 @@ def rigid_fit(P: np.ndarray, Y: np.ndarray, weights: np.ndarray | None = None):
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
     R = Vt.T @ D @ U.T
     return R, yc - R @ pc
+
+
+def matrix_from_quaternion(quat: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) from unit quaternions (N, 4) ordered (w, x, y, z)."""
+    w, x, y, z = np.moveaxis(np.asarray(quat, dtype=float), -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (N, 4), (w, x, y, z) with w >= 0, from rotation matrices (N, 3, 3)."""
+    R = np.asarray(R, dtype=float)
+    tr = np.trace(R, axis1=-2, axis2=-1)
+    # the largest of 1 + tr, 1 + 2 R_ii - tr keeps the square root well away from zero
+    cand = np.stack(
+        [1 + tr, 1 + 2 * R[..., 0, 0] - tr, 1 + 2 * R[..., 1, 1] - tr, 1 + 2 * R[..., 2, 2] - tr],
+        -1,
+    )
+    k = np.argmax(cand, axis=-1)
+    s = np.sqrt(np.take_along_axis(cand, k[..., None], -1)[..., 0]) * 2
+    r = lambda i, j: R[..., i, j]  # noqa: E731
+    quats = [
+        np.stack(
+            [s / 4, (r(2, 1) - r(1, 2)) / s, (r(0, 2) - r(2, 0)) / s, (r(1, 0) - r(0, 1)) / s], -1
+        ),
+        np.stack(
+            [(r(2, 1) - r(1, 2)) / s, s / 4, (r(0, 1) + r(1, 0)) / s, (r(0, 2) + r(2, 0)) / s], -1
+        ),
+        np.stack(
+            [(r(0, 2) - r(2, 0)) / s, (r(0, 1) + r(1, 0)) / s, s / 4, (r(1, 2) + r(2, 1)) / s], -1
+        ),
+        np.stack(
+            [(r(1, 0) - r(0, 1)) / s, (r(0, 2) + r(2, 0)) / s, (r(1, 2) + r(2, 1)) / s, s / 4], -1
+        ),
+    ]
+    q = np.choose(k[..., None], quats)
+    return q * np.where(q[..., :1] < 0, -1.0, 1.0)

@@ -46,6 +46,8 @@ def identify(
     tolerance: float = 1e-10,
     truth: dict | None = None,
     orientation_sigma: float | None = None,
+    loss: str = "linear",
+    loss_scale: float = 3.0,
 ) -> Calibration:
     """Identify the parameter deviations of `robot` from measured positions.
 
@@ -84,6 +86,13 @@ def identify(
     orientation_sigma : float, optional
         σ of measured orientations, rad (default: the measurements'; without one, 1 mrad
         of rotation weighs like 0.1 mm of position).
+    loss : {"linear", "huber", "soft_l1"}
+        ``"linear"`` is least squares. The robust losses down-weight measured points whose
+        residual norm e exceeds `loss_scale` (Huber: weight c/e beyond c; soft-L1:
+        1/√(1 + (e/c)²)), by iteratively reweighted least squares around `method`.
+    loss_scale : float
+        c: in units of the measurement σ when σ is given (default 3 σ), otherwise in units
+        of the residuals' robust standard deviation (from their median).
 
     Returns
     -------
@@ -146,11 +155,36 @@ def identify(
     kwargs = {"max_iterations": max_iterations, "tolerance": tolerance}
     if method == "ipopt":
         kwargs.update(bounds=bounds, prior=prior)
+    if loss not in LOSSES:
+        raise CalibrationError(f"unknown loss {loss!r}; use one of {', '.join(LOSSES)}")
+    if not (np.isfinite(loss_scale) and loss_scale > 0):
+        raise CalibrationError(f"loss_scale must be a positive number, got {loss_scale!r}")
     obs, estimated = _analyse(make(start, names=names))
+    base_problem = make(start, names=names).restricted(estimated)
+    problem = base_problem
+    weights = np.ones((q.shape[0], y.shape[1]))
+    iterations, history = 0, []
+    for _ in range(1 if loss == "linear" else 20):
+        x, its, status, hist, message = solver(problem, np.zeros(len(estimated)), **kwargs)
+        iterations += its
+        history += hist if not history else hist[1:]
+        start = start.with_deviations(dict(zip(estimated, x.tolist(), strict=True)))
+        if loss == "linear" or status <= 0:
+            break
+        base_problem = make(start, names=names).restricted(estimated)
+        e = np.linalg.norm(
+            base_problem.point_residuals(np.zeros(len(estimated))) * w[:, None, :], axis=2
+        )  # (N, m), in units of sigma (or m without sigma)
+        c = loss_scale * (1.0 if known else _robust_sd(e))
+        new = _loss_weights(loss, e, c)
+        if np.abs(new - weights).max() < 1e-6:
+            break
+        weights = new
+        problem = base_problem.reweighted(weights)
+    outliers = _outliers(make(start, names=names).restricted(estimated), w)
     problem = make(start, names=names).restricted(estimated)
-    x, iterations, status, history, message = solver(problem, np.zeros(len(estimated)), **kwargs)
-    start = start.with_deviations(dict(zip(estimated, x.tolist(), strict=True)))
-    problem = make(start, names=names).restricted(estimated)
+    if loss != "linear":
+        problem = problem.reweighted(weights)
     x = np.zeros(len(estimated))
 
     # deviations are from the user's nominal robot; held parameters keep their start value
@@ -175,6 +209,10 @@ def identify(
         residuals=problem.point_residuals(x).reshape(-1, 3),
         residuals_before=(y - robot.measured_points(q)).reshape(-1, 3),
         orientation_residuals=problem.orientation_residuals(x),
+        outliers=outliers,
+        loss=loss
+        if loss == "linear"
+        else f"{loss} (scale {loss_scale:g}{' sigma' if known else ' robust sd'})",
         iterations=iterations,
         status=status,
         message=message or STATUS_MESSAGES[status],
@@ -185,6 +223,45 @@ def identify(
         start_note=note,
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+LOSSES = ("linear", "huber", "soft_l1")
+
+
+def _loss_weights(loss: str, e: np.ndarray, c: float) -> np.ndarray:
+    """IRLS weights of residual norms `e` for a robust loss of scale `c`."""
+    if loss == "huber":
+        return np.where(e <= c, 1.0, c / np.maximum(e, 1e-300))
+    return 1.0 / np.sqrt(1.0 + (e / c) ** 2)
+
+
+def _robust_sd(e: np.ndarray) -> float:
+    """Standard deviation of one coordinate from the median of point-residual norms.
+
+    For Gaussian noise the norm of a 3-vector has median ≈ 1.538 σ.
+    """
+    return float(np.median(e)) / 1.538 or 1e-12
+
+
+OUTLIER_THRESHOLD = 5.0
+"""Robust standard deviations (1.4826 MAD) above the median that make a pose stand out."""
+
+
+def _outliers(problem: Problem, w: np.ndarray) -> tuple[int, ...]:
+    """Poses whose largest point residual stands out from the others.
+
+    A pose is listed when its largest (σ-weighted) point-residual norm lies more than
+    `OUTLIER_THRESHOLD` robust standard deviations above the median of all poses. The
+    norm of Gaussian noise in 3-D has a long right tail, hence 5 rather than 3.
+    """
+    e = np.linalg.norm(
+        problem.point_residuals(np.zeros(len(problem.names))) * w[:, None, :], axis=2
+    ).max(axis=1)
+    med = np.median(e)
+    spread = 1.4826 * np.median(np.abs(e - med))
+    if spread == 0:
+        return ()
+    return tuple(int(i) for i in np.flatnonzero(e > med + OUTLIER_THRESHOLD * spread))
 
 
 def _with_points(robot: Robot, m: int) -> tuple[Robot, str]:

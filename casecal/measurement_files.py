@@ -5,6 +5,9 @@ One row per pose. Columns (any order; extra columns are kept out of the way and 
 - joints ``q1`` … ``qn`` in rad (revolute) or m (prismatic), or with the unit in the
   name: ``q1_deg``, ``q1_rad``, ``q3_mm``, ``q3_m``;
 - measured position ``x, y, z`` in m, or ``x_mm, y_mm, z_mm``;
+- several reflectors per pose instead: ``p1_x_mm, p1_y_mm, p1_z_mm, p2_x_mm, …``;
+- optional tool orientation as a unit quaternion ``qw, qx, qy, qz`` (tool frame in the
+  measurement frame);
 - optional noise σ: ``sigma`` (m) or ``sigma_mm``, one isotropic value per row, or per
   axis ``sigma_x_mm`` … ``sigma_z_mm``.
 
@@ -23,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import CalibrationError
+from .frames import matrix_from_quaternion, quaternion_from_matrix
 from .measurements import Measurements
 from .robot import Robot
 
@@ -73,10 +77,8 @@ def read_csv(path, robot: Robot) -> Measurements:
             f"{label}: column {extra[0]!r} but robot {robot.name!r} has {robot.dof} joints; "
             "use the robot the data came from"
         )
-    y = np.empty((len(df), 3))
-    for k, axis in enumerate("xyz"):
-        name, scale = _pick(df, label, [axis], None)
-        y[:, k] = _numbers(df, name, label) * scale
+    y = _positions(df, columns, label)
+    orientations = _orientations(df, columns, label)
     sigma = np.zeros((len(df), 3))
     if any(c in df for c in ("sigma", "sigma_m", "sigma_mm", "sigma_um")):
         name, scale = _pick(df, label, ["sigma"], None)
@@ -88,7 +90,56 @@ def read_csv(path, robot: Robot) -> Measurements:
     if np.any(sigma < 0):
         row = int(np.argwhere(sigma < 0)[0][0])
         raise CalibrationError(f"{label}: row {row + 2}: sigma is negative; it must be >= 0")
-    return Measurements(q=q, positions=y, sigma=sigma)
+    return Measurements(q=q, positions=y, sigma=sigma, orientations=orientations)
+
+
+_POINT = re.compile(r"^p(\d+)_([xyz])(?:_(mm|m|um))?$")
+
+
+def _positions(df: pd.DataFrame, columns, label: str) -> np.ndarray:
+    """x, y, z -> (N, 3); or p1_x … pm_z (several reflectors) -> (N, m, 3), in m."""
+    numbered = sorted({int(m.group(1)) for c in columns if (m := _POINT.match(c))})
+    if not numbered:
+        y = np.empty((len(df), 3))
+        for k, axis in enumerate("xyz"):
+            name, scale = _pick(df, label, [axis], None)
+            y[:, k] = _numbers(df, name, label) * scale
+        return y
+    plain = [c for c in columns if re.fullmatch(r"[xyz](_(mm|m|um))?", c)]
+    if plain:
+        raise CalibrationError(
+            f"{label}: both {plain[0]!r} and numbered points (p1_x…) are given; use one form"
+        )
+    if numbered != list(range(1, len(numbered) + 1)):
+        raise CalibrationError(
+            f"{label}: measured points are numbered {numbered}; number them p1, p2, … without gaps"
+        )
+    y = np.empty((len(df), len(numbered), 3))
+    for j in numbered:
+        for k, axis in enumerate("xyz"):
+            name, scale = _pick(df, label, [f"p{j}_{axis}"], None)
+            y[:, j - 1, k] = _numbers(df, name, label) * scale
+    return y
+
+
+def _orientations(df: pd.DataFrame, columns, label: str) -> np.ndarray | None:
+    """qw, qx, qy, qz (unit quaternion of the tool frame) -> (N, 3, 3), or None."""
+    names = ("qw", "qx", "qy", "qz")
+    present = [c for c in names if c in columns]
+    if not present:
+        return None
+    if len(present) != 4:
+        missing = [c for c in names if c not in columns]
+        raise CalibrationError(f"{label}: orientation needs qw, qx, qy, qz; missing {missing}")
+    quat = np.column_stack([_numbers(df, c, label) for c in names])
+    norm = np.linalg.norm(quat, axis=1)
+    bad = np.flatnonzero(np.abs(norm - 1) > 1e-3)
+    if bad.size:
+        raise CalibrationError(
+            f"{label}: row {bad[0] + 2}: quaternion (qw, qx, qy, qz) has norm {norm[bad[0]]:.4g}; "
+            "it must be a unit quaternion"
+        )
+    return matrix_from_quaternion(quat / norm[:, None])
 
 
 def write_csv(path, measurements: Measurements, robot: Robot) -> None:
@@ -104,8 +155,18 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
             data[f"q{i}_deg"] = np.rad2deg(col)
         else:
             data[f"q{i}_mm"] = col * 1e3
-    for k, axis in enumerate("xyz"):
-        data[f"{axis}_mm"] = measurements.positions[:, k] * 1e3
+    points = measurements.points
+    if measurements.positions.ndim == 2:
+        for k, axis in enumerate("xyz"):
+            data[f"{axis}_mm"] = points[:, 0, k] * 1e3
+    else:
+        for j in range(points.shape[1]):
+            for k, axis in enumerate("xyz"):
+                data[f"p{j + 1}_{axis}_mm"] = points[:, j, k] * 1e3
+    if measurements.orientations is not None:
+        quat = quaternion_from_matrix(measurements.orientations)
+        for k, c in enumerate(("qw", "qx", "qy", "qz")):
+            data[c] = quat[:, k]
     sigma = measurements.sigma
     if np.any(sigma > 0):
         if np.all(sigma == sigma[:, :1]):

@@ -115,6 +115,21 @@ class Problem:
         self.w_flat = self.w_rows.ravel()
         self._memo: dict = {}  # (kind, p bytes) -> array; shared with `restricted` copies
 
+    def reweighted(self, point_weights: np.ndarray) -> Problem:
+        """The same problem with each measured point's rows scaled by √weight (N, m).
+
+        For iteratively reweighted least squares (robust losses); orientation rows keep
+        the weight of the pose's least-trusted point.
+        """
+        other = self.restricted(self.names)
+        scale = np.sqrt(np.repeat(point_weights, 3, axis=1))
+        if self.R is not None:
+            scale = np.hstack([scale, np.repeat(scale.min(axis=1, keepdims=True), 3, axis=1)])
+        other.w_rows = self.w_rows * scale
+        other.w_flat = other.w_rows.ravel()
+        other._memo = self._memo
+        return other
+
     def restricted(self, names) -> Problem:
         """The same data and kernel for a subset of the parameters (shares the memo)."""
         other = Problem.__new__(Problem)

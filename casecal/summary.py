@@ -107,6 +107,16 @@ def _notes(cal: Calibration) -> list[str]:
         notes.append(f"The fit did not converge: {cal.message}. Do not use these values.")
     if cal.start_note:
         notes.append(cal.start_note)
+    if cal.loss != "linear":
+        notes.append(f"Robust fit: {cal.loss} loss, by iteratively reweighted least squares.")
+    if cal.outliers:
+        rows = ", ".join(str(i + 2) for i in cal.outliers[:12]) + (
+            " …" if len(cal.outliers) > 12 else ""
+        )
+        notes.append(
+            f"{len(cal.outliers)} poses stand out (file rows {rows}): check them, or fit with "
+            "a robust loss (--loss huber)."
+        )
     if obs.blind_spots:
         held = ", ".join(cal.held) if cal.held else "none"
         notes.append(
