@@ -13,6 +13,7 @@ from .identifiability import Observability, observability
 from .identification import identify
 from .measurements import Measurements, simulate
 from .robot import Frame, Joint, Robot
+from .validation import Validation, validate
 
 __all__ = [
     "Calibration",
@@ -22,6 +23,7 @@ __all__ = [
     "Measurements",
     "Observability",
     "Robot",
+    "Validation",
     "identify",
     "load_robot",
     "observability",
@@ -29,5 +31,6 @@ __all__ = [
     "robot_to_toml",
     "robots",
     "simulate",
+    "validate",
 ]
 __version__ = "0.1.0"

@@ -40,6 +40,7 @@ _LENGTH = {"m": 1.0, "mm": 1e-3}
 _ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
 _TOP_KEYS = {
     "points",
+    "calibrated_from",
     "name",
     "convention",
     "length_unit",
@@ -177,8 +178,12 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
             "points = [[0.0, 0.0, 0.1]]"
         )
     points = tuple(tuple(_number(v, label, "points") * length for v in p) for p in points)
+    calibrated_from = data.get("calibrated_from", "")
+    if not isinstance(calibrated_from, str):
+        raise CalibrationError(f"{label}: calibrated_from must be a robot name or path string")
     return Robot(
         name=name,
+        calibrated_from=calibrated_from,
         points=points,
         joints=tuple(joints),
         convention=convention,
@@ -249,6 +254,8 @@ def robot_to_toml(robot: Robot) -> str:
         lines.append("source = [" + ", ".join(_q(s) for s in robot.source) + "]")
     if robot.confidence:
         lines.append(f"confidence = {_q(robot.confidence)}")
+    if robot.calibrated_from:
+        lines.append(f"calibrated_from = {_q(robot.calibrated_from)}")
     for j in robot.joints:
         lines += [
             "",

@@ -6,6 +6,7 @@ Exit codes: 0 success, 2 a user error (one line on stderr), 1 a bug (traceback).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import math
 import os
@@ -21,6 +22,7 @@ from .identification import METHODS, identify
 from .measurement_files import read_csv, write_atomic, write_csv
 from .measurements import simulate
 from .parameters import unit
+from .validation import split, validate
 
 _LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
 
@@ -70,13 +72,35 @@ def _cmd_simulate(args: argparse.Namespace) -> None:
     )
 
 
+def parse_angle(text: str) -> float:
+    """'0.01deg', '1e-4rad' or a bare number (degrees) to radians."""
+    t = text.strip().lower()
+    scale, number = math.pi / 180, t
+    if t.endswith("deg"):
+        number = t[:-3]
+    elif t.endswith("rad"):
+        scale, number = 1.0, t[:-3]
+    try:
+        value = float(number) * scale
+    except ValueError:
+        raise CalibrationError(f"{text!r} is not an angle; write e.g. 0.01deg or 2e-4rad") from None
+    if not math.isfinite(value) or value < 0:
+        raise CalibrationError(f"{text!r} must be a finite, non-negative angle")
+    return value
+
+
 def _cmd_identify(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
     meas = read_csv(args.measurements, robot)
-    if args.output:  # fail before the work, not after it
-        _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
+    for out in (args.output, args.deviations_out):
+        if out:  # fail before the work, not after it
+            _check_writable_dir(os.path.dirname(os.path.abspath(out)))
     noise = parse_length(args.noise) if args.noise is not None else None
     truth = load_deviations(args.truth, robot) if args.truth else None
+    held = None
+    if args.holdout:
+        meas, held = split(meas, args.holdout, seed=args.seed)
+    rot = parse_angle(args.orientation_sigma) if args.orientation_sigma else None
     cal = identify(
         robot,
         meas,
@@ -85,13 +109,65 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         noise=noise,
         truth=truth,
         max_iterations=args.max_iterations,
+        loss=args.loss,
+        loss_scale=args.loss_scale,
+        orientation_sigma=rot,
     )
     print(cal.summary())
+    if held is not None:
+        print(f"\nValidation on {held.n_poses} held-out poses (--holdout {args.holdout}):")
+        print(validate(cal.robot, held, robot))
     if not cal.success:
         raise CalibrationError(f"the fit did not converge ({cal.message}); nothing written")
     if args.output:
-        write_atomic(args.output, robot_to_toml(cal.robot))
+        calibrated = dataclasses.replace(cal.robot, calibrated_from=args.robot, auto_beta=False)
+        write_atomic(args.output, robot_to_toml(calibrated))
         print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
+    if args.deviations_out:
+        write_atomic(args.deviations_out, _deviations_text(cal, args.deviations_out))
+        print(f"deviations with standard errors written to {args.deviations_out}")
+
+
+def _deviations_text(cal, path: str) -> str:
+    if path.endswith(".json"):
+        import json
+
+        data = {
+            n: {
+                "deviation": cal.deviations[n],
+                "standard_error": cal.standard_errors[n],
+                "unit": unit(n),
+                "estimated": n in cal.estimated,
+            }
+            for n in cal.parameters
+        }
+        return json.dumps(
+            {"robot": cal.nominal.name, "method": cal.method, "rms_m": cal.rms, "parameters": data},
+            indent=2,
+            allow_nan=True,
+        )
+    table = cal.table.copy()
+    table.insert(3, "deviation_si", [cal.deviations[n] for n in cal.parameters])
+    table.insert(4, "std_error_si", [cal.standard_errors[n] for n in cal.parameters])
+    table.insert(5, "si_unit", [unit(n) for n in cal.parameters])
+    return table.to_csv(index=False, float_format="%.12g", lineterminator="\n")
+
+
+def _cmd_validate(args: argparse.Namespace) -> None:
+    calibrated = load_robot(args.calibrated)
+    nominal_name = args.nominal or calibrated.calibrated_from
+    if not nominal_name:
+        raise CalibrationError(
+            f"{args.calibrated} does not say which robot it was calibrated from; give --nominal"
+        )
+    nominal = load_robot(nominal_name)
+    if (
+        nominal.structure.names[: len(nominal.parameter_names)]
+        != calibrated.parameter_names[: len(nominal.parameter_names)]
+    ):
+        raise CalibrationError(f"{nominal_name} and {args.calibrated} are different robots")
+    meas = read_csv(args.measurements, calibrated)
+    print(validate(calibrated, meas, nominal))
 
 
 def _cmd_report(args: argparse.Namespace) -> None:
@@ -313,6 +389,37 @@ def build_parser() -> argparse.ArgumentParser:
         help="TOML of the true deviations (simulations): adds error columns",
     )
     p.add_argument("--max-iterations", type=int, default=100, help="for iterated methods")
+    p.add_argument(
+        "--holdout",
+        type=float,
+        default=None,
+        metavar="FRACTION",
+        help="keep this fraction of the poses out of the fit and report the "
+        "errors on them before and after calibration (e.g. 0.2)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed of --holdout (default 0)")
+    p.add_argument(
+        "--loss",
+        choices=("linear", "huber", "soft_l1"),
+        default="linear",
+        help="robust loss for data with outliers (default linear: least squares)",
+    )
+    p.add_argument(
+        "--loss-scale",
+        type=float,
+        default=3.0,
+        help="robust loss scale, in units of sigma (default 3)",
+    )
+    p.add_argument(
+        "--orientation-sigma",
+        metavar="ANGLE",
+        help="sigma of measured orientations (qw..qz columns), e.g. 0.01deg",
+    )
+    p.add_argument(
+        "--deviations-out",
+        metavar="FILE",
+        help="write deviations and standard errors as .json or .csv",
+    )
     p.add_argument("-o", "--output", metavar="TOML", help="write the calibrated robot here")
     p.set_defaults(func=_cmd_identify)
 
@@ -326,6 +433,22 @@ def build_parser() -> argparse.ArgumentParser:
     add_schedule(p, 100)
     p.add_argument("--parameters", default=None, help=params_help)
     p.set_defaults(func=_cmd_observability)
+
+    p = sub.add_parser(
+        "validate",
+        help="errors of a calibrated robot on held-out measurements",
+        description="Refit only the frames (base, tool, reflectors: the instrument may have "
+        "moved) of the nominal and the calibrated robot to held-out measurements and print "
+        "RMS, mean and max position error before and after calibration, in mm.",
+    )
+    p.add_argument("calibrated", metavar="CALIBRATED.toml", help="written by casecal identify -o")
+    p.add_argument("measurements", metavar="CSV", help="held-out measurements")
+    p.add_argument(
+        "--nominal",
+        metavar="ROBOT",
+        help="the nominal robot (default: calibrated_from in the TOML)",
+    )
+    p.set_defaults(func=_cmd_validate)
 
     p = sub.add_parser(
         "report",

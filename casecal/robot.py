@@ -97,6 +97,7 @@ class Robot:
     source: tuple[str, ...] = ()
     confidence: str = ""
     points: tuple[tuple[float, float, float], ...] = ()
+    calibrated_from: str = ""
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:

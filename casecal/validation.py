@@ -1,0 +1,109 @@
+"""Held-out validation: how well a calibrated robot predicts measurements it was not fit to."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CalibrationError
+from .identification import identify
+from .measurements import Measurements
+from .robot import Robot
+
+FRAME_PARAMETERS = ("base_*", "tool_x", "tool_y", "tool_z", "point*")
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Position errors of a model on some measurements, m (one entry per measured point)."""
+
+    rms: float
+    mean: float
+    max: float
+    n_points: int
+
+    @classmethod
+    def of(cls, residuals: np.ndarray) -> ErrorStats:
+        e = np.linalg.norm(np.asarray(residuals).reshape(-1, 3), axis=1)
+        return cls(float(np.sqrt(np.mean(e**2))), float(e.mean()), float(e.max()), e.size)
+
+
+@dataclass(frozen=True)
+class Validation:
+    """Errors of the nominal and of the calibrated model on held-out measurements.
+
+    Both models get their frames (base, tool position, reflectors) refitted to these
+    measurements first, since the instrument may have moved; the DH parameters are not
+    touched, so what remains is what the calibration did or did not fix.
+    """
+
+    before: ErrorStats
+    after: ErrorStats
+    n_poses: int
+
+    def __str__(self) -> str:
+        rows = [
+            f"{self.n_poses} held-out poses, {self.after.n_points} measured points; "
+            "frames refitted to them, DH parameters as calibrated",
+            f"{'':8}{'RMS':>10}{'mean':>10}{'max':>10}   (mm)",
+        ]
+        for label, s in (("before", self.before), ("after", self.after)):
+            rows.append(f"{label:8}{s.rms * 1e3:10.4f}{s.mean * 1e3:10.4f}{s.max * 1e3:10.4f}")
+        return "\n".join(rows)
+
+
+def refit_frames(robot: Robot, measurements: Measurements) -> ErrorStats:
+    """Errors of `robot` on `measurements` after fitting its frames alone to them."""
+    try:
+        cal = identify(robot, measurements, list(FRAME_PARAMETERS), "gauss-newton")
+    except CalibrationError:
+        # too few held-out poses for the frames: compare as it stands
+        res = measurements.points - robot.measured_points(measurements.q)
+        return ErrorStats.of(res)
+    return ErrorStats.of(cal.residuals)
+
+
+def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> Validation:
+    """Compare `nominal` and `calibrated` on held-out `measurements` (frames refitted).
+
+    Parameters
+    ----------
+    calibrated, nominal : Robot
+        The same structure; the nominal gets the calibrated robot's reflector layout as
+        its starting guess when it has none.
+    measurements : Measurements
+        Poses not used in the calibration.
+    """
+    if nominal.points == () and calibrated.points:
+        nominal = nominal.with_points(calibrated.points)
+    return Validation(
+        before=refit_frames(nominal, measurements),
+        after=refit_frames(calibrated, measurements),
+        n_poses=measurements.n_poses,
+    )
+
+
+def split(measurements: Measurements, fraction: float, seed=0):
+    """Random (fit, held-out) split of the poses; `fraction` of them are held out."""
+    if not 0 < fraction < 1:
+        raise CalibrationError(f"holdout fraction must be between 0 and 1, got {fraction}")
+    n = measurements.n_poses
+    k = round(fraction * n)
+    if k < 1 or n - k < 1:
+        raise CalibrationError(f"holdout {fraction} of {n} poses leaves no poses on one side")
+    held = np.zeros(n, bool)
+    held[np.random.default_rng(seed).choice(n, size=k, replace=False)] = True
+
+    def take(mask):
+        return Measurements(
+            q=measurements.q[mask],
+            positions=measurements.positions[mask],
+            sigma=measurements.sigma[mask],
+            orientations=None
+            if measurements.orientations is None
+            else measurements.orientations[mask],
+            orientation_sigma=measurements.orientation_sigma,
+        )
+
+    return take(~held), take(held)
