@@ -170,7 +170,12 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     if not isinstance(name, str) or not name:
         raise CalibrationError(f"{label}: name must be a non-empty string")
     source = data.get("source", ())
-    source = (source,) if isinstance(source, str) else tuple(str(s) for s in source)
+    if isinstance(source, str):
+        source = (source,)
+    elif isinstance(source, list) and all(isinstance(s, str) for s in source):
+        source = tuple(source)
+    else:
+        raise CalibrationError(f"{label}: source must be a string or a list of strings")
     points = data.get("points", [])
     if not isinstance(points, list) or not all(isinstance(p, list) and len(p) == 3 for p in points):
         raise CalibrationError(
@@ -299,7 +304,7 @@ def _no_unknown(table: dict, allowed: set, label: str, where: str) -> None:
 
 def _unit(data: dict, key: str, table: dict, label: str) -> float:
     value = data.get(key, next(iter(table)))
-    if value not in table:
+    if not isinstance(value, str) or value not in table:
         raise CalibrationError(
             f"{label}: {key} = {value!r} is unknown; use one of {', '.join(map(repr, table))}"
         )

@@ -57,6 +57,8 @@ def _schedule(robot, args):
 
 def _cmd_simulate(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
+    if not args.output.strip():
+        raise CalibrationError("the output file name is empty; give a file name with -o")
     _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
     deviations = load_deviations(args.deviations, robot) if args.deviations else {}
     true = robot.with_deviations(deviations)
@@ -93,6 +95,8 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
     meas = read_csv(args.measurements, robot)
     for out in (args.output, args.deviations_out):
+        if out is not None and not out.strip():
+            raise CalibrationError("an output file name is empty; give a file name")
         if out:  # fail before the work, not after it
             _check_writable_dir(os.path.dirname(os.path.abspath(out)))
     noise = parse_length(args.noise) if args.noise is not None else None
@@ -271,9 +275,17 @@ def _cmd_show(args: argparse.Namespace) -> None:
         print(f"confidence: {robot.confidence}")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's error convention: one line on stderr, exit code 2."""
+
+    def error(self, message: str):
+        sys.stderr.write(f"casecal: error: {message} (see '{self.prog} --help')\n")
+        sys.exit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``casecal`` command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="casecal",
         description="Kinematic calibration of serial robot arms: robot models with exact "
         "parameter Jacobians (CasADi), identification of DH errors from measured positions.",

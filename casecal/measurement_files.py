@@ -20,6 +20,7 @@ import math
 import os
 import re
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -52,13 +53,24 @@ def read_csv(path, robot: Robot) -> Measurements:
     if not Path(path).is_file():
         raise CalibrationError(f"measurement file {label!r} does not exist; check the path")
     try:
-        df = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+        with warnings.catch_warnings():
+            # a row with more fields than the header must fail, not lose or shift data
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            df = pd.read_csv(
+                path, dtype=str, keep_default_na=False, skipinitialspace=True, index_col=False
+            )
+    except pd.errors.ParserWarning:
+        raise CalibrationError(
+            f"{label}: some rows have more fields than the header; check the delimiters "
+            "and that every value has a column name"
+        ) from None
     except pd.errors.EmptyDataError:
         raise CalibrationError(
             f"{label}: the file is empty; it needs a header and one row per pose"
         ) from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise CalibrationError(f"{label}: not a readable CSV file ({exc})") from None
+    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
+        detail = " ".join(str(exc).split())  # pandas' messages span lines
+        raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
     columns = [str(c).strip() for c in df.columns]
     duplicated = sorted({c for c in columns if columns.count(c) > 1} | _mangled(columns))
     if duplicated:
@@ -180,7 +192,11 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
 
 def write_atomic(path, text: str) -> None:
     """Write `text` to `path` through a temporary file and a rename: never half a file."""
+    if not str(path).strip():
+        raise CalibrationError("the output file name is empty; give a file name")
     path = Path(path)
+    if path.is_dir():
+        raise CalibrationError(f"{str(path)!r} is a folder; give a file name")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or Path("."))
     except OSError as exc:

@@ -158,9 +158,11 @@ def simulate(true_robot: Robot, q, noise=0.0, seed=None, orientation_noise=None)
     -------
     Measurements
     """
+    from .poses import rng_from
+
     q2, _ = check_joint_values(q, true_robot.dof)
     sigma = broadcast_sigma(noise, q2.shape[0])
-    rng = np.random.default_rng(seed)
+    rng = rng_from(seed)
     points = true_robot.measured_points(q2)  # (N, m, 3)
     if np.any(sigma > 0):
         points = points + rng.normal(size=points.shape) * sigma[:, None, :]

@@ -7,11 +7,26 @@ import numpy as np
 from .errors import CalibrationError
 from .robot import Robot
 
+MAX_POSES = 10_000_000
+"""More poses than anyone measures; beyond it a request is a typo, not a plan."""
+
 
 def _check_count(n) -> int:
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
-        raise CalibrationError(f"number of poses must be a positive integer, got {n!r}")
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_POSES:
+        raise CalibrationError(
+            f"number of poses must be an integer from 1 to {MAX_POSES:,}, got {n!r}"
+        )
     return int(n)
+
+
+def rng_from(seed) -> np.random.Generator:
+    """A numpy Generator from a seed (non-negative int), a Generator, or None."""
+    if isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed < 0:
+        raise CalibrationError(f"a seed must be a non-negative integer, got {seed}")
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"a seed must be a non-negative integer, got {seed!r}") from None
 
 
 def seed_schedule(robot: Robot, n: int) -> np.ndarray:
@@ -64,6 +79,6 @@ def uniform(robot: Robot, n: int, seed=None) -> np.ndarray:
         Joint values, rad (R) or m (P).
     """
     n = _check_count(n)
-    rng = np.random.default_rng(seed)
+    rng = rng_from(seed)
     limits = robot.limits
     return rng.uniform(limits[:, 0], limits[:, 1], size=(n, robot.dof))

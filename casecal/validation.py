@@ -9,6 +9,7 @@ import numpy as np
 from .errors import CalibrationError
 from .identification import identify
 from .measurements import Measurements
+from .poses import rng_from
 from .robot import Robot
 
 FRAME_PARAMETERS = ("base_*", "tool_x", "tool_y", "tool_z", "point*")
@@ -93,7 +94,7 @@ def split(measurements: Measurements, fraction: float, seed=0):
     if k < 1 or n - k < 1:
         raise CalibrationError(f"holdout {fraction} of {n} poses leaves no poses on one side")
     held = np.zeros(n, bool)
-    held[np.random.default_rng(seed).choice(n, size=k, replace=False)] = True
+    held[rng_from(seed).choice(n, size=k, replace=False)] = True
 
     def take(mask):
         return Measurements(
