@@ -172,7 +172,7 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     source = data.get("source", ())
     if isinstance(source, str):
         source = (source,)
-    elif isinstance(source, list) and all(isinstance(s, str) for s in source):
+    elif isinstance(source, list | tuple) and all(isinstance(s, str) for s in source):
         source = tuple(source)
     else:
         raise CalibrationError(f"{label}: source must be a string or a list of strings")

@@ -14,7 +14,7 @@ MAX_POSES = 10_000_000
 def _check_count(n) -> int:
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_POSES:
         raise CalibrationError(
-            f"number of poses must be an integer from 1 to {MAX_POSES:,}, got {n!r}"
+            f"number of poses must be a positive integer (at most {MAX_POSES:,}), got {n!r}"
         )
     return int(n)
 
