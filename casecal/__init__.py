@@ -8,7 +8,7 @@ flow and README.md for the commands.
 from . import poses
 from .calibration import Calibration
 from .catalog import load_robot, robot_to_toml, robots
-from .errors import CalibrationError
+from .errors import CalibrationError, CalibrationWarning
 from .identifiability import Observability, observability
 from .identification import identify
 from .measurements import Measurements, simulate
@@ -18,6 +18,7 @@ from .validation import Validation, validate
 __all__ = [
     "Calibration",
     "CalibrationError",
+    "CalibrationWarning",
     "Frame",
     "Joint",
     "Measurements",

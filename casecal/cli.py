@@ -11,6 +11,7 @@ import logging
 import math
 import os
 import sys
+import warnings
 
 import numpy as np
 
@@ -118,6 +119,11 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         orientation_sigma=rot,
     )
     print(cal.summary())
+    if args.strict and cal.unidentifiable:
+        raise CalibrationError(
+            f"--strict: the data cannot identify {', '.join(cal.unidentifiable)}; ask for "
+            "fewer parameters or measure more varied poses (nothing written)"
+        )
     if held is not None:
         print(f"\nValidation on {held.n_poses} held-out poses (--holdout {args.holdout}):")
         print(validate(cal.robot, held, robot))
@@ -273,6 +279,10 @@ def _cmd_show(args: argparse.Namespace) -> None:
             print(f"  - {s}")
     if robot.confidence:
         print(f"confidence: {robot.confidence}")
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"casecal: warning: {message}", file=sys.stderr)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -432,6 +442,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="write deviations and standard errors as .json or .csv",
     )
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="fail (exit 2, nothing written) if any asked-for parameter cannot be identified, "
+        "instead of holding it at nominal and saying so",
+    )
     p.add_argument("-o", "--output", metavar="TOML", help="write the calibrated robot here")
     p.set_defaults(func=_cmd_identify)
 
@@ -497,6 +513,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     level = {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG)
     logging.basicConfig(level=level, format="casecal: %(levelname)s: %(message)s")
+    warnings.showwarning = _one_line_warning
     try:
         args.func(args)
     except CalibrationError as exc:

@@ -7,3 +7,8 @@ class CalibrationError(ValueError):
     The message always says what was wrong and how to fix it. The command line turns it into
     one line on stderr and exit code 2.
     """
+
+
+class CalibrationWarning(UserWarning):
+    """Something the user should look at that does not stop the work (e.g. joint values
+    outside the robot's limits). The command line prints it as one line."""

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .errors import CalibrationError
+from .errors import CalibrationError, CalibrationWarning
 from .frames import matrix_from_quaternion, quaternion_from_matrix
 from .measurements import Measurements
 from .robot import Robot
@@ -89,6 +89,7 @@ def read_csv(path, robot: Robot) -> Measurements:
             f"{label}: column {extra[0]!r} but robot {robot.name!r} has {robot.dof} joints; "
             "use the robot the data came from"
         )
+    _warn_outside_limits(q, robot, label)
     y = _positions(df, columns, label)
     orientations = _orientations(df, columns, label)
     sigma = np.zeros((len(df), 3))
@@ -103,6 +104,22 @@ def read_csv(path, robot: Robot) -> Measurements:
         row = int(np.argwhere(sigma < 0)[0][0])
         raise CalibrationError(f"{label}: row {row + 2}: sigma is negative; it must be >= 0")
     return Measurements(q=q, positions=y, sigma=sigma, orientations=orientations)
+
+
+def _warn_outside_limits(q: np.ndarray, robot: Robot, label: str) -> None:
+    for i, joint in enumerate(robot.joints):
+        if joint.limits is None:
+            continue
+        lo, hi = joint.limits
+        slack = 1e-9 * max(1.0, abs(lo), abs(hi))
+        rows = np.flatnonzero((q[:, i] < lo - slack) | (q[:, i] > hi + slack))
+        if rows.size:
+            warnings.warn(
+                f"{label}: joint {i + 1} is outside its limits in {rows.size} rows (first: "
+                f"row {rows[0] + 2}); check the joint zero and units, or the robot's limits",
+                CalibrationWarning,
+                stacklevel=3,
+            )
 
 
 _POINT = re.compile(r"^p(\d+)_([xyz])(?:_(mm|m|um))?$")

@@ -454,6 +454,10 @@ def _call(argv) -> tuple[int, str, str]:
 def _assert_user_error(argv, code, err) -> None:
     where = f"casecal {' '.join(map(repr, argv))}"
     assert "Traceback" not in err, f"{where}: traceback on stderr:\n{err}"
+    # warnings (e.g. joints outside their limits) come one per line before the error
+    lines = err.splitlines(keepends=True)
+    assert all(line.startswith("casecal: warning:") for line in lines[:-1]), err
+    err = lines[-1] if lines else err
     assert code == 2, f"{where}: exit code {code}, stderr:\n{err}"
     assert err.startswith("casecal: error:"), (
         f"{where}: stderr is not 'casecal: error: ...':\n{err}"

@@ -65,3 +65,23 @@ def test_validate_needs_to_know_the_nominal(tmp_path, capsys):
     write_csv(csv, cc.simulate(robot, np.array([[0.1, 0.2], [0.3, 0.1]])), robot)
     assert main(["validate", str(path), str(csv)]) == 2
     assert "--nominal" in capsys.readouterr().err
+
+
+def test_joint_values_outside_limits_warn_in_one_line(tmp_path, capsys):
+    robot = cc.load_robot("scorbot")
+    q = cc.poses.seed_schedule(robot, 30)  # the paper's schedule leaves joint 3's range
+    csv = tmp_path / "m.csv"
+    write_csv(csv, cc.simulate(robot, q), robot)
+    assert main(["identify", "scorbot", str(csv)]) == 0
+    err = capsys.readouterr().err
+    warnings_ = [line for line in err.splitlines() if line.startswith("casecal: warning:")]
+    assert len(warnings_) == 1 and "joint 3 is outside its limits" in warnings_[0]
+
+
+def test_strict_refuses_blind_parameters(tmp_path, capsys):
+    robot = cc.load_robot("scorbot")
+    csv, out = tmp_path / "m.csv", tmp_path / "c.toml"
+    write_csv(csv, cc.simulate(robot, cc.poses.uniform(robot, 30, seed=0)), robot)
+    assert main(["identify", "scorbot", str(csv), "--strict", "-o", str(out)]) == 2
+    assert "theta5" in capsys.readouterr().err and not out.exists()
+    assert main(["identify", "scorbot", str(csv), "--strict", "--parameters", "theta1,a2"]) == 0
