@@ -129,3 +129,17 @@ def test_robust_loss_and_outlier_list():
     assert holdout_rms(plain, true, robot) > 2 * holdout_rms(robust, true, robot)
     text = str(robust.summary())
     assert "huber" in text and "stand out" in text
+
+
+def test_calibrated_robot_file_reproduces_the_calibrated_positions(tmp_path):
+    robot = cc.load_robot("rx90b")
+    true = robot.with_deviations(realistic_truth(robot, seed=10)).with_points([[0.05, 0, 0.1]])
+    q = cc.poses.uniform(robot, 40, seed=1)
+    cal = cc.identify(robot, cc.simulate(true, q, noise=SIGMA, seed=2), "all", "lm")
+    path = tmp_path / "calibrated.toml"
+    path.write_text(cc.robot_to_toml(cal.robot))
+    again = cc.load_robot(path)
+    q_new = cc.poses.uniform(robot, 300, seed=3)
+    np.testing.assert_allclose(
+        again.measured_points(q_new), cal.robot.measured_points(q_new), rtol=0, atol=1e-12
+    )
