@@ -82,3 +82,143 @@ def uniform(robot: Robot, n: int, seed=None) -> np.ndarray:
     rng = rng_from(seed)
     limits = robot.limits
     return rng.uniform(limits[:, 0], limits[:, 1], size=(n, robot.dof))
+
+
+def optimal(
+    robot: Robot,
+    n: int,
+    candidates=None,
+    criterion: str = "O1",
+    parameters=None,
+    seed=0,
+    n_candidates: int = 2000,
+    max_passes: int = 10,
+) -> np.ndarray:
+    """Choose `n` poses from candidates that maximise an observability index.
+
+    The identification Jacobian of each candidate (3 × k, columns scaled by their norms
+    over all candidates) adds ``JᵀJ`` to the information matrix M. ``"O1"`` maximises
+    ``log det M`` (D-optimal: O1 is its geometric mean of singular values); ``"O3"`` its
+    smallest eigenvalue (E-optimal). A greedy pass adds the best candidate at each step,
+    then exchange passes (DETMAX) swap chosen poses for better candidates until no swap
+    improves the criterion. Each candidate is scored by rank-3 updates (Woodbury and the
+    matrix determinant lemma), not by refactorising M.
+
+    Parameters
+    ----------
+    robot : Robot
+    n : int
+        Number of poses to choose.
+    candidates : array-like, shape (C, dof), optional
+        Default: `n_candidates` uniform poses inside the limits (`seed`).
+    criterion : {"O1", "O3"}
+    parameters : optional
+        The parameters the poses should identify (default: the paper's θ, a, d), reduced
+        to those the candidates can identify at all.
+    seed : int
+    n_candidates : int
+    max_passes : int
+        Exchange passes at most.
+
+    Returns
+    -------
+    q : ndarray, shape (n, dof)
+        The chosen poses, in the order chosen.
+    """
+    from .identifiability import analyse, selection  # poses sit below identification
+
+    n = _check_count(n)
+    if criterion not in ("O1", "O3"):
+        raise CalibrationError(f"criterion must be 'O1' or 'O3', got {criterion!r}")
+    cand = (
+        uniform(robot, n_candidates, seed=seed)
+        if candidates is None
+        else np.asarray(candidates, float)
+    )
+    if cand.ndim != 2 or cand.shape[1] != robot.dof or len(cand) < n:
+        raise CalibrationError(f"candidates must be (C, {robot.dof}) with C >= n = {n}")
+    names = selection(robot, parameters)
+    J, names = robot.position_jacobian(cand, names)
+    base = analyse(J.reshape(-1, len(names)), names, len(cand)).base_parameters
+    J = J[:, :, [names.index(b) for b in base]]
+    J = J / np.linalg.norm(J.reshape(-1, len(base)), axis=0)  # (C, 3, k) scaled
+    k = len(base)
+    if 3 * n < k:
+        raise CalibrationError(f"{n} poses give {3 * n} coordinates for {k} parameters")
+    chosen = _greedy(J, n, criterion)
+    chosen = _exchange(J, chosen, criterion, max_passes)
+    return cand[chosen]
+
+
+def _score(J: np.ndarray, Minv: np.ndarray, M: np.ndarray, criterion: str) -> np.ndarray:
+    """Criterion gain of adding each candidate's rows J (C, 3, k) to M."""
+    if criterion == "O1":
+        A = (J @ Minv) @ np.swapaxes(J, 1, 2) + np.eye(3)  # (C, 3, 3), batched matmul
+        return np.linalg.slogdet(A)[1]
+    # O3: first-order gain along the weakest direction, then exact on the best few
+    w, V = np.linalg.eigh(M)
+    v = V[:, 0]
+    first = np.sum((J @ v) ** 2, axis=1)
+    best = np.argsort(first)[-16:]
+    gain = np.full(len(J), -np.inf)
+    for c in best:
+        gain[c] = np.linalg.eigvalsh(M + J[c].T @ J[c])[0] - w[0]
+    return gain
+
+
+def _greedy(J: np.ndarray, n: int, criterion: str) -> list[int]:
+    k = J.shape[2]
+    eps = 1e-9 * np.trace(np.einsum("cik,cil->kl", J, J)) / len(J)
+    M = eps * np.eye(k)  # a tiny ridge: det and inverse exist before k/3 poses are in
+    Minv = np.eye(k) / eps
+    chosen: list[int] = []
+    available = np.ones(len(J), bool)
+    for _ in range(n):
+        gain = _score(J, Minv, M, criterion)
+        gain[~available] = -np.inf
+        c = int(np.argmax(gain))
+        chosen.append(c)
+        available[c] = False
+        M += J[c].T @ J[c]
+        Minv = _woodbury(Minv, J[c], +1.0)
+    return chosen
+
+
+def _woodbury(Minv: np.ndarray, Jc: np.ndarray, sign: float) -> np.ndarray:
+    """(M ± Jcᵀ Jc)⁻¹ from M⁻¹ by the Woodbury identity (rank 3)."""
+    U = Minv @ Jc.T  # (k, 3)
+    S = np.eye(3) * sign + Jc @ U
+    return Minv - U @ np.linalg.solve(S, U.T)
+
+
+def _value(M: np.ndarray, criterion: str) -> float:
+    if criterion == "O1":
+        return float(np.linalg.slogdet(M)[1])
+    return float(np.linalg.eigvalsh(M)[0])
+
+
+def _exchange(J: np.ndarray, chosen: list[int], criterion: str, max_passes: int) -> list[int]:
+    Jc = J[chosen].reshape(-1, J.shape[2])
+    M = Jc.T @ Jc
+    current = _value(M, criterion)
+    for _ in range(max_passes):
+        improved = False
+        for slot in range(len(chosen)):
+            out = chosen[slot]
+            M_minus = M - J[out].T @ J[out]
+            try:  # positive definite without this pose? then it can be exchanged
+                L = np.linalg.cholesky(M_minus)
+            except np.linalg.LinAlgError:
+                continue
+            Linv = np.linalg.inv(L)
+            Minv = Linv.T @ Linv
+            gain = _score(J, Minv, M_minus, criterion)
+            gain[chosen] = -np.inf
+            c = int(np.argmax(gain))
+            M_new = M_minus + J[c].T @ J[c]
+            value = _value(M_new, criterion)
+            if value > current + 1e-9 * max(1.0, abs(current)):
+                chosen[slot], M, current, improved = c, M_new, value, True
+        if not improved:
+            break
+    return chosen
