@@ -163,6 +163,40 @@ def _deviations_text(cal, path: str) -> str:
     return table.to_csv(index=False, float_format="%.12g", lineterminator="\n")
 
 
+def _cmd_calibrate_until(args: argparse.Namespace) -> None:
+    from .campaign import calibrate_until, pool_measure
+
+    robot = load_robot(args.robot)
+    pool = read_csv(args.pool, robot)
+    if args.output:
+        _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
+    candidates, measure = pool_measure(pool)
+    run = calibrate_until(
+        robot,
+        measure,
+        parse_length(args.threshold),
+        batch=args.batch,
+        max_poses=min(args.max_poses, pool.n_poses),
+        order=args.order,
+        parameters=args.parameters,
+        candidates=candidates,
+    )
+    print(run)
+    print()
+    print(run.calibration.summary())
+    if not run.reached:
+        raise CalibrationError(
+            f"the pool's poses did not reach {args.threshold} (predicted "
+            f"{run.predicted * 1e3:.3f} mm); nothing written"
+        )
+    if args.output:
+        calibrated = dataclasses.replace(
+            run.calibration.robot, calibrated_from=args.robot, auto_beta=False
+        )
+        write_atomic(args.output, robot_to_toml(calibrated))
+        print(f"\ncalibrated robot written to {args.output}")
+
+
 def _cmd_validate(args: argparse.Namespace) -> None:
     calibrated = load_robot(args.calibrated)
     nominal_name = args.nominal or calibrated.calibrated_from
@@ -461,6 +495,31 @@ def build_parser() -> argparse.ArgumentParser:
     add_schedule(p, 100)
     p.add_argument("--parameters", default=None, help=params_help)
     p.set_defaults(func=_cmd_observability)
+
+    p = sub.add_parser(
+        "calibrate-until",
+        help="use the fewest measured poses that reach an error threshold",
+        description="From a pool of measured poses (CSV), take poses in batches (D-optimal "
+        "given those already taken, the paper's order, or uniform), identify after each "
+        "batch, and stop when the predicted 95 %% position error on new poses is under the "
+        "threshold. Prints how many poses it took.",
+    )
+    p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path (nominal robot)")
+    p.add_argument("pool", metavar="CSV", help="measured poses to choose from")
+    p.add_argument(
+        "--threshold", default="0.1mm", help="predicted 95 %% error to reach (default 0.1mm)"
+    )
+    p.add_argument("--batch", type=int, default=5, help="poses per round (default 5)")
+    p.add_argument("--max-poses", type=int, default=300, help="stop here (default 300)")
+    p.add_argument(
+        "--order",
+        choices=("optimal", "seed", "uniform"),
+        default="optimal",
+        help="how to choose the next poses (default optimal)",
+    )
+    p.add_argument("--parameters", default=None, help=params_help)
+    p.add_argument("-o", "--output", metavar="TOML", help="write the calibrated robot here")
+    p.set_defaults(func=_cmd_calibrate_until)
 
     p = sub.add_parser(
         "validate",

@@ -93,6 +93,7 @@ def optimal(
     seed=0,
     n_candidates: int = 2000,
     max_passes: int = 10,
+    include=None,
 ) -> np.ndarray:
     """Choose `n` poses from candidates that maximise an observability index.
 
@@ -119,6 +120,9 @@ def optimal(
     n_candidates : int
     max_passes : int
         Exchange passes at most.
+    include : array-like, shape (m, dof), optional
+        Poses already measured: their information counts, and the `n` new poses complete
+        them (sequential design). They are not returned.
 
     Returns
     -------
@@ -141,12 +145,18 @@ def optimal(
     J, names = robot.position_jacobian(cand, names)
     base = analyse(J.reshape(-1, len(names)), names, len(cand)).base_parameters
     J = J[:, :, [names.index(b) for b in base]]
-    J = J / np.linalg.norm(J.reshape(-1, len(base)), axis=0)  # (C, 3, k) scaled
+    scale = np.linalg.norm(J.reshape(-1, len(base)), axis=0)
+    J = J / scale  # (C, 3, k) scaled
     k = len(base)
-    if 3 * n < k:
+    if 3 * (n + (0 if include is None else len(include))) < k:
         raise CalibrationError(f"{n} poses give {3 * n} coordinates for {k} parameters")
-    chosen = _greedy(J, n, criterion)
-    chosen = _exchange(J, chosen, criterion, max_passes)
+    M0 = None
+    if include is not None and len(include):
+        Ji, _ = robot.position_jacobian(np.asarray(include, float), names)
+        Ji = Ji[:, :, [names.index(b) for b in base]] / scale
+        M0 = np.einsum("cik,cil->kl", Ji, Ji)
+    chosen = _greedy(J, n, criterion, M0)
+    chosen = _exchange(J, chosen, criterion, max_passes, M0)
     return cand[chosen]
 
 
@@ -166,11 +176,11 @@ def _score(J: np.ndarray, Minv: np.ndarray, M: np.ndarray, criterion: str) -> np
     return gain
 
 
-def _greedy(J: np.ndarray, n: int, criterion: str) -> list[int]:
+def _greedy(J: np.ndarray, n: int, criterion: str, M0=None) -> list[int]:
     k = J.shape[2]
     eps = 1e-9 * np.trace(np.einsum("cik,cil->kl", J, J)) / len(J)
-    M = eps * np.eye(k)  # a tiny ridge: det and inverse exist before k/3 poses are in
-    Minv = np.eye(k) / eps
+    M = eps * np.eye(k) + (0 if M0 is None else M0)  # a tiny ridge: invertible from the start
+    Minv = np.linalg.inv(M)
     chosen: list[int] = []
     available = np.ones(len(J), bool)
     for _ in range(n):
@@ -197,9 +207,11 @@ def _value(M: np.ndarray, criterion: str) -> float:
     return float(np.linalg.eigvalsh(M)[0])
 
 
-def _exchange(J: np.ndarray, chosen: list[int], criterion: str, max_passes: int) -> list[int]:
+def _exchange(
+    J: np.ndarray, chosen: list[int], criterion: str, max_passes: int, M0=None
+) -> list[int]:
     Jc = J[chosen].reshape(-1, J.shape[2])
-    M = Jc.T @ Jc
+    M = Jc.T @ Jc + (0 if M0 is None else M0)
     current = _value(M, criterion)
     for _ in range(max_passes):
         improved = False

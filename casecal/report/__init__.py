@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from .common import StudyResult, style
+from .studies_beyond import enough_poses, optimal_poses
 from .studies_paper import planar_arms, scara_observability, table1
 from .studies_sweeps import noise_sweep, pose_count_sweep, six_axis
 
@@ -23,6 +24,8 @@ STUDIES: dict[str, Callable] = {
     "pose_count": pose_count_sweep,
     "noise": noise_sweep,
     "six_axis": six_axis,
+    "optimal_poses": optimal_poses,
+    "calibrate_until": enough_poses,
 }
 PDF_TABLES = {"table1", "scara_blind_spots", "six_axis_observability"}
 

@@ -1,0 +1,200 @@
+"""Calibrate until good enough: measure poses in batches until the predicted error is small.
+
+The paper's conclusion asks for "a particular threshold value for sufficient calibration"
+reached with "a minimum number of pose measurements". `calibrate_until` adds poses in
+batches (D-optimal given those already measured, or in the paper's order, or uniform),
+identifies after each batch, and predicts the position error the calibrated robot will
+make on poses it was not fitted to, from the covariance of the estimate. It stops when
+that prediction is under the threshold.
+
+The prediction covers what measurement noise leaves in the parameters (the model is
+assumed right); each held-out pose's error is Gaussian with covariance ``J C Jᵀ``, and the
+predicted error is the 95th percentile over 200 uniform held-out poses of that error's
+95 % radius (χ² with 3 degrees of freedom).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.stats
+
+from . import poses
+from .calibration import Calibration
+from .errors import CalibrationError
+from .identification import identify
+from .measurements import Measurements
+from .robot import Robot
+
+ORDERS = ("optimal", "seed", "uniform")
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """How a calibrate-until-good-enough run went.
+
+    Attributes
+    ----------
+    calibration : Calibration
+        The last identification.
+    measurements : Measurements
+        Everything measured.
+    predicted : float
+        Predicted 95 % position error on held-out poses at the end, m.
+    history : tuple of (int, float)
+        (poses measured, predicted error in m) after each batch.
+    reached : bool
+        Whether the prediction went under the threshold.
+    threshold : float
+        m.
+    """
+
+    calibration: Calibration
+    measurements: Measurements
+    predicted: float
+    history: tuple[tuple[int, float], ...]
+    reached: bool
+    threshold: float
+
+    @property
+    def n_poses(self) -> int:
+        """Poses measured."""
+        return self.measurements.n_poses
+
+    def __str__(self) -> str:
+        state = "reached" if self.reached else "NOT reached"
+        steps = ", ".join(f"{n}: {e * 1e3:.3f}" for n, e in self.history)
+        return (
+            f"threshold {self.threshold * 1e3:g} mm {state} with {self.n_poses} poses; "
+            f"predicted 95 % error (mm) after each batch: {steps}"
+        )
+
+
+def predicted_error(cal: Calibration, q_holdout: np.ndarray, level: float = 0.95) -> float:
+    """The `level` percentile over `q_holdout` of each pose's `level` error radius, m."""
+    J, _ = cal.robot.position_jacobian(q_holdout, list(cal.estimated))
+    cov = np.einsum("nik,kl,njl->nij", J, cal.covariance, J)  # (N, 3, 3)
+    radius = np.sqrt(np.trace(cov, axis1=1, axis2=2) * scipy.stats.chi2.ppf(level, 3) / 3)
+    return float(np.quantile(radius, level))
+
+
+def calibrate_until(
+    robot: Robot,
+    measure: Callable[[np.ndarray], Measurements],
+    threshold: float = 0.1e-3,
+    *,
+    batch: int = 5,
+    max_poses: int = 300,
+    order: str = "optimal",
+    parameters=None,
+    method: str = "gauss-newton",
+    candidates=None,
+    seed: int = 0,
+) -> Campaign:
+    """Measure poses in batches until the predicted held-out error is under `threshold`.
+
+    Parameters
+    ----------
+    robot : Robot
+        Nominal robot.
+    measure : callable(q (n, dof)) -> Measurements
+        Measures the requested poses (a simulation, or the lookup of a pool of measured
+        poses, see `pool_measure`). Its σ weights the fit and the prediction.
+    threshold : float
+        Predicted 95 % position error to reach, m (default 0.1 mm).
+    batch : int
+        Poses added per round.
+    max_poses : int
+        Stop here even if the threshold was not reached.
+    order : {"optimal", "seed", "uniform"}
+        D-optimal poses given those already measured (from `candidates`), the paper's
+        schedule in its order, or uniform poses.
+    parameters, method
+        As for `casecal.identify` (default: the paper's θ, a, d; Gauss-Newton).
+    candidates : array-like, shape (C, dof), optional
+        Poses that can be measured (default 2000 uniform).
+    seed : int
+
+    Returns
+    -------
+    Campaign
+    """
+    if order not in ORDERS:
+        raise CalibrationError(f"order must be one of {', '.join(ORDERS)}, got {order!r}")
+    if not (threshold > 0 and np.isfinite(threshold)):
+        raise CalibrationError(f"threshold must be a positive length in m, got {threshold!r}")
+    if batch < 1 or max_poses < batch:
+        raise CalibrationError("batch must be >= 1 and max_poses >= batch")
+    cand = (
+        poses.uniform(robot, 2000, seed=seed)
+        if candidates is None
+        else np.asarray(candidates, float)
+    )
+    q_hold = poses.uniform(robot, 200, seed=seed + 1)
+    k = len(
+        robot.position_jacobian(cand[:1], parameters if parameters else ["theta*", "a*", "d*"])[1]
+    )
+    n = max(batch, -(-k // 3) + 1)  # the first round must be able to identify something
+    q = np.zeros((0, robot.dof))
+    meas, cal, history, pred = None, None, [], np.inf
+    rng = np.random.default_rng(seed + 2)
+    schedule = poses.seed_schedule(robot, max_poses)
+    while True:
+        n_new = min(n - len(q), max_poses - len(q))
+        if order == "optimal":
+            new = poses.optimal(
+                robot,
+                n_new,
+                candidates=cand,
+                parameters=parameters,
+                include=q if len(q) else None,
+                max_passes=2,
+            )
+        elif order == "seed":
+            new = schedule[len(q) : len(q) + n_new]
+        else:
+            new = cand[rng.choice(len(cand), n_new, replace=False)]
+        q = np.vstack([q, new])
+        got = measure(new)
+        meas = got if meas is None else _concat(meas, got)
+        try:
+            cal = identify(robot, meas, parameters, method)
+            pred = predicted_error(cal, q_hold) if cal.success else np.inf
+        except CalibrationError:
+            pred = np.inf  # too few poses yet
+        history.append((len(q), pred))
+        if pred < threshold or len(q) >= max_poses:
+            break
+        n = len(q) + batch
+    if cal is None:
+        raise CalibrationError(f"{len(q)} poses could not be identified at all")
+    return Campaign(cal, meas, pred, tuple(history), bool(pred < threshold), threshold)
+
+
+def pool_measure(pool: Measurements) -> tuple[np.ndarray, Callable]:
+    """Candidates and a `measure` that looks requested poses up in measured `pool`."""
+
+    def measure(q):
+        idx = [int(np.flatnonzero(np.all(pool.q == row, axis=1))[0]) for row in q]
+        return Measurements(
+            pool.q[idx],
+            pool.positions[idx],
+            pool.sigma[idx],
+            None if pool.orientations is None else pool.orientations[idx],
+            pool.orientation_sigma,
+        )
+
+    return pool.q.copy(), measure
+
+
+def _concat(a: Measurements, b: Measurements) -> Measurements:
+    orient = None if a.orientations is None else np.concatenate([a.orientations, b.orientations])
+    return Measurements(
+        np.vstack([a.q, b.q]),
+        np.concatenate([a.positions, b.positions]),
+        np.vstack([a.sigma, b.sigma]),
+        orient,
+        a.orientation_sigma,
+    )

@@ -1,0 +1,167 @@
+"""Beyond the paper: which poses to measure, and how many are enough."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+from .. import poses
+from ..campaign import calibrate_until
+from ..catalog import load_robot
+from ..errors import CalibrationError
+from ..identification import identify
+from ..measurements import simulate
+from ..study import Grid, derive_seed, truth_for
+from .common import COLORS, StudyResult, pose_axis, save, table
+
+ROBOT = "kr15_2"
+ORDER_COLORS = {"optimal": "#2ca02c", "uniform": COLORS["uniform"], "seed": COLORS["seed"]}
+ORDER_LABEL = {"optimal": "D-optimal poses", "uniform": "uniform poses", "seed": "paper's schedule"}
+
+
+def optimal_poses(out: Path, quick: bool = False, run=None) -> StudyResult:
+    """Held-out error of D-optimal against uniform poses, by pose count."""
+    res = StudyResult("optimal_poses", "Which poses?")
+    robot = load_robot(ROBOT)
+    sigma = 0.05e-3
+    counts = (8, 15, 30) if quick else (6, 8, 12, 20, 30, 50)
+    trials = 10 if quick else 30
+    q_hold = poses.uniform(robot, 200, seed=99)
+    rows = []
+    for t in range(trials):
+        true = robot.with_deviations(truth_for(Grid(robots=(ROBOT,)), robot, t))
+        p_hold = true.position(q_hold)
+        for n in counts:
+            designs = {
+                "optimal": poses.optimal(robot, n, seed=t),
+                "uniform": poses.uniform(robot, n, seed=derive_seed(0, "uni", n, t)),
+            }
+            for name, q in designs.items():
+                meas = simulate(true, q, noise=sigma, seed=derive_seed(0, "noise", n, t))
+                try:
+                    cal = identify(robot, meas, None, "gauss-newton")
+                except CalibrationError:  # too few poses for this draw: data, not a crash
+                    continue
+                e = cal.robot.position(q_hold) - p_hold
+                rows.append(
+                    {
+                        "design": name,
+                        "n_poses": n,
+                        "trial": t,
+                        "rms_holdout_mm": float(np.sqrt(np.mean(np.sum(e**2, 1)))) * 1e3,
+                    }
+                )
+    df = pd.DataFrame(rows)
+    fig, ax = plt.subplots(figsize=(6.5, 3.4))
+    means = df.groupby(["design", "n_poses"])["rms_holdout_mm"].mean().unstack(0)
+    for design in ("optimal", "uniform"):
+        ax.loglog(
+            means.index,
+            means[design],
+            marker="o",
+            ms=3,
+            color=ORDER_COLORS[design],
+            label=ORDER_LABEL[design],
+        )
+    ax.set_xlabel("number of poses N")
+    ax.set_ylabel("mean held-out RMS error (mm)")
+    pose_axis(ax, counts)
+    ax.legend(fontsize=7)
+    gain = 1 - means["optimal"] / means["uniform"]
+    res.figures.append(
+        save(
+            fig,
+            out,
+            "optimal_poses",
+            "Which poses: D-optimal against uniform",
+            f"KUKA KR 15/2, θ, a, d identified, σ = {sigma * 1e3:g} mm, mean held-out RMS over "
+            f"{trials} trials of random deviations. Poses chosen from 2,000 uniform candidates to "
+            f"maximise det JᵀJ (casecal.poses.optimal: greedy, then exchange passes) cut the "
+            f"error by {100 * gain.iloc[0]:.0f} % at {counts[0]} poses and by "
+            f"{100 * gain.iloc[-1]:.0f} % at {counts[-1]}: choosing poses matters most when few "
+            "can be measured.",
+        )
+    )
+    res.tables.append(table(df, out, "optimal_poses_trials", "Pose design", "One row per trial."))
+    return res
+
+
+def enough_poses(out: Path, quick: bool = False, run=None) -> StudyResult:
+    """How many poses each ordering needs before the predicted error is under 0.1 mm."""
+    res = StudyResult("calibrate_until", "How many poses are enough?")
+    robot = load_robot(ROBOT)
+    threshold = 0.1e-3
+    levels = (0.02, 0.1) if quick else (0.01, 0.02, 0.05, 0.1)
+    trials = 2 if quick else 4
+    rows = []
+    for sigma_mm in levels:
+        for t in range(trials):
+            true = robot.with_deviations(truth_for(Grid(robots=(ROBOT,)), robot, t))
+            for order in ("optimal", "uniform", "seed"):
+
+                def measure(q, true=true, s=sigma_mm * 1e-3, tag=(order, sigma_mm, t)):
+                    return simulate(true, q, noise=s, seed=derive_seed(1, *tag, len(q)))
+
+                run_ = calibrate_until(
+                    robot, measure, threshold, order=order, max_poses=300, seed=t
+                )
+                rows.append(
+                    {
+                        "order": order,
+                        "noise_mm": sigma_mm,
+                        "trial": t,
+                        "poses": run_.n_poses,
+                        "reached": run_.reached,
+                    }
+                )
+    df = pd.DataFrame(rows)
+    fig, ax = plt.subplots(figsize=(6.5, 3.4))
+    med = df.groupby(["order", "noise_mm"])["poses"].median().unstack(0)
+    for order in ("optimal", "uniform", "seed"):
+        ax.semilogy(
+            med.index,
+            med[order],
+            marker="o",
+            ms=4,
+            color=ORDER_COLORS[order],
+            label=ORDER_LABEL[order],
+        )
+    ax.axhline(300, color="k", lw=0.6, ls=":")
+    ax.text(levels[0], 320, "limit: 300 poses", fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xticks(list(levels), [f"{v:g}" for v in levels])
+    ax.minorticks_off()
+    ax.set_xlabel("measurement noise σ (mm)")
+    ax.set_ylabel("poses measured (median)")
+    ax.legend(fontsize=7)
+    not_reached = df[~df.reached].groupby("order").size().to_dict()
+    res.figures.append(
+        save(
+            fig,
+            out,
+            "calibrate_until",
+            "How many poses are enough",
+            f"KUKA KR 15/2: poses measured in batches of 5 until the predicted 95 % position error "
+            f"on new poses falls under {threshold * 1e3:g} mm (casecal.calibrate_until), median of "
+            f"{trials} trials. D-optimal poses need "
+            + ", ".join(f"{int(v)}" for v in med["optimal"])
+            + " poses at σ = "
+            + ", ".join(f"{v:g}" for v in levels)
+            + " mm; uniform poses "
+            + ", ".join(f"{int(v)}" for v in med["uniform"])
+            + "; the paper's schedule "
+            + ", ".join(f"{int(v)}" for v in med["seed"])
+            + (
+                f" (not reached within 300 poses in {not_reached.get('seed', 0)} runs)"
+                if not_reached.get("seed")
+                else ""
+            )
+            + ". The prediction comes from the fit's own covariance, so the loop knows when to "
+            "stop without a separate validation set.",
+        )
+    )
+    res.tables.append(table(df, out, "calibrate_until_runs", "Calibrate until", "One row per run."))
+    return res

@@ -1,0 +1,45 @@
+"""Calibrate until good enough: the prediction is honest, and good poses need fewer."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import casecal as cc
+from casecal.campaign import calibrate_until, pool_measure
+from casecal.study import Grid, truth_for
+
+SIGMA = 0.02e-3
+
+
+def test_campaign_reaches_threshold_and_keeps_its_promise():
+    robot = cc.load_robot("kr15_2")
+    true = robot.with_deviations(truth_for(Grid(robots=("kr15_2",)), robot, 0))
+    runs = {}
+    for order in ("optimal", "uniform"):
+        runs[order] = calibrate_until(
+            robot,
+            lambda q: cc.simulate(true, q, noise=SIGMA, seed=len(q)),
+            threshold=0.05e-3,
+            order=order,
+            max_poses=120,
+        )
+        assert runs[order].reached, str(runs[order])
+        # the promise: the actual 95 % error on new poses is under the threshold too
+        q_new = cc.poses.uniform(robot, 300, seed=5)
+        e = np.linalg.norm(
+            runs[order].calibration.robot.position(q_new) - true.position(q_new), axis=1
+        )
+        assert np.quantile(e, 0.95) < 0.05e-3
+    assert runs["optimal"].n_poses <= runs["uniform"].n_poses
+    predictions = [p for _, p in runs["uniform"].history]
+    assert predictions == sorted(predictions, reverse=True)  # more poses, smaller prediction
+
+
+def test_campaign_from_a_pool_of_measured_poses():
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 2e-4, "theta3": 1e-4, "d4": -1e-4})
+    pool = cc.simulate(true, cc.poses.uniform(robot, 300, seed=1), noise=SIGMA, seed=2)
+    candidates, measure = pool_measure(pool)
+    run = calibrate_until(robot, measure, threshold=0.08e-3, candidates=candidates)
+    assert run.reached and run.n_poses < 100
+    assert set(map(tuple, run.measurements.q)) <= set(map(tuple, pool.q))
