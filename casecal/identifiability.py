@@ -241,7 +241,7 @@ def _zero_column_spot(name: str) -> BlindSpot:
         members=(name,),
         blind=(name,),
         visible=None,
-        text=f"{name}: its column is zero, it does not move the measured point at these poses",
+        text=f"{name}: its column is zero, it does not change what is measured at these poses",
     )
 
 

@@ -49,47 +49,9 @@ def read_csv(path, robot: Robot) -> Measurements:
     Measurements
         SI units.
     """
-    label = str(path)
-    if not Path(path).is_file():
-        raise CalibrationError(f"measurement file {label!r} does not exist; check the path")
-    try:
-        with warnings.catch_warnings():
-            # a row with more fields than the header must fail, not lose or shift data
-            warnings.simplefilter("error", pd.errors.ParserWarning)
-            df = pd.read_csv(
-                path, dtype=str, keep_default_na=False, skipinitialspace=True, index_col=False
-            )
-    except pd.errors.ParserWarning:
-        raise CalibrationError(
-            f"{label}: some rows have more fields than the header; check the delimiters "
-            "and that every value has a column name"
-        ) from None
-    except pd.errors.EmptyDataError:
-        raise CalibrationError(
-            f"{label}: the file is empty; it needs a header and one row per pose"
-        ) from None
-    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
-        detail = " ".join(str(exc).split())  # pandas' messages span lines
-        raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
-    columns = [str(c).strip() for c in df.columns]
-    duplicated = sorted({c for c in columns if columns.count(c) > 1} | _mangled(columns))
-    if duplicated:
-        raise CalibrationError(f"{label}: column {duplicated[0]!r} appears twice; keep one")
-    df.columns = columns
-    if df.empty:
-        raise CalibrationError(f"{label}: the header has no rows below it; add one row per pose")
-
-    q = np.empty((len(df), robot.dof))
-    for i, joint in enumerate(robot.joints, start=1):
-        name, scale = _pick(df, label, [f"q{i}"], joint)
-        q[:, i - 1] = _numbers(df, name, label) * scale
-    extra = [c for c in columns if (m := _JOINT.match(c)) and int(m.group(1)) > robot.dof]
-    if extra:
-        raise CalibrationError(
-            f"{label}: column {extra[0]!r} but robot {robot.name!r} has {robot.dof} joints; "
-            "use the robot the data came from"
-        )
-    _warn_outside_limits(q, robot, label)
+    df, label = read_table(path)
+    columns = list(df.columns)
+    q = read_joints(df, robot, label)
     y = _positions(df, columns, label)
     orientations = _orientations(df, columns, label)
     sigma = np.zeros((len(df), 3))
@@ -169,6 +131,59 @@ def _orientations(df: pd.DataFrame, columns, label: str) -> np.ndarray | None:
             "it must be a unit quaternion"
         )
     return matrix_from_quaternion(quat / norm[:, None])
+
+
+def read_table(path) -> tuple[pd.DataFrame, str]:
+    """A CSV file as a DataFrame of strings, checked: it exists, parses, has unique columns
+    and at least one row. Returns the frame and the label for messages."""
+    label = str(path)
+    if not Path(path).is_file():
+        raise CalibrationError(f"file {label!r} does not exist; check the path")
+    try:
+        with warnings.catch_warnings():
+            # a row with more fields than the header must fail, not lose or shift data
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            df = pd.read_csv(
+                path, dtype=str, keep_default_na=False, skipinitialspace=True, index_col=False
+            )
+    except pd.errors.ParserWarning:
+        raise CalibrationError(
+            f"{label}: some rows have more fields than the header; check the delimiters "
+            "and that every value has a column name"
+        ) from None
+    except pd.errors.EmptyDataError:
+        raise CalibrationError(
+            f"{label}: the file is empty; it needs a header and one row per pose"
+        ) from None
+    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
+        detail = " ".join(str(exc).split())  # pandas' messages span lines
+        raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
+    columns = [str(c).strip() for c in df.columns]
+    duplicated = sorted({c for c in columns if columns.count(c) > 1} | _mangled(columns))
+    if duplicated:
+        raise CalibrationError(f"{label}: column {duplicated[0]!r} appears twice; keep one")
+    df.columns = columns
+    if df.empty:
+        raise CalibrationError(f"{label}: the header has no rows below it; add one row per pose")
+
+    return df, label
+
+
+def read_joints(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
+    """The joint columns of `df` for `robot`, in SI, shape (N, dof); warns outside limits."""
+    columns = list(df.columns)
+    q = np.empty((len(df), robot.dof))
+    for i, joint in enumerate(robot.joints, start=1):
+        name, scale = _pick(df, label, [f"q{i}"], joint)
+        q[:, i - 1] = _numbers(df, name, label) * scale
+    extra = [c for c in columns if (m := _JOINT.match(c)) and int(m.group(1)) > robot.dof]
+    if extra:
+        raise CalibrationError(
+            f"{label}: column {extra[0]!r} but robot {robot.name!r} has {robot.dof} joints; "
+            "use the robot the data came from"
+        )
+    _warn_outside_limits(q, robot, label)
+    return q
 
 
 def write_csv(path, measurements: Measurements, robot: Robot) -> None:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from .common import StudyResult, style
-from .studies_beyond import enough_poses, optimal_poses
+from .studies_beyond import enough_poses, optimal_poses, relative_measurements
 from .studies_paper import planar_arms, scara_observability, table1
 from .studies_sweeps import noise_sweep, pose_count_sweep, six_axis
 
@@ -26,6 +26,7 @@ STUDIES: dict[str, Callable] = {
     "six_axis": six_axis,
     "optimal_poses": optimal_poses,
     "calibrate_until": enough_poses,
+    "relative": relative_measurements,
 }
 PDF_TABLES = {"table1", "scara_blind_spots", "six_axis_observability"}
 

@@ -1,0 +1,226 @@
+"""Relative measurements: distances between the tool points of two poses.
+
+A ball bar, a calibrated plate or a pair of points a known distance apart measures
+``|f(q_i) - f(q_j)|`` without any external frame. Distances do not change when everything
+moves rigidly, so the base frame cannot be seen; what else becomes blind is left to the
+identifiability analysis of the distance Jacobian ``uᵀ (J_i - J_j)`` (u the unit vector
+from one point to the other), not assumed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from .calibration import STATUS_MESSAGES, Calibration
+from .errors import CalibrationError
+from .identifiability import analyse, selection
+from .identification import METHODS, _covariance
+from .measurement_files import _numbers, read_joints, read_table
+from .poses import rng_from
+from .robot import Robot, check_joint_values
+from .solvers import SOLVERS
+
+
+@dataclass(frozen=True)
+class DistanceMeasurements:
+    """Measured distances between the tool points of pairs of poses.
+
+    Attributes
+    ----------
+    q : ndarray, shape (N, dof)
+        Poses, rad (R) or m (P).
+    pairs : ndarray of int, shape (P, 2)
+        0-based pose indices of each measured pair.
+    distances : ndarray, shape (P,)
+        Measured distances, m.
+    sigma : ndarray, shape (P,)
+        Their noise σ, m (0: unknown / noise-free).
+    """
+
+    q: np.ndarray
+    pairs: np.ndarray
+    distances: np.ndarray
+    sigma: np.ndarray
+
+    def __post_init__(self) -> None:
+        q, _ = check_joint_values(self.q, np.shape(self.q)[-1] if np.ndim(self.q) else 0)
+        pairs = np.asarray(self.pairs)
+        if pairs.ndim != 2 or pairs.shape[1] != 2 or len(pairs) == 0:
+            raise CalibrationError("pairs must have shape (P, 2), P >= 1: two pose indices each")
+        if not np.issubdtype(pairs.dtype, np.integer):
+            raise CalibrationError("pair indices must be integers")
+        if pairs.min() < 0 or pairs.max() >= len(q) or np.any(pairs[:, 0] == pairs[:, 1]):
+            raise CalibrationError(
+                f"pair indices must name two different poses among 0 … {len(q) - 1}"
+            )
+        d = np.asarray(self.distances, dtype=float)
+        if d.shape != (len(pairs),) or not np.all(np.isfinite(d)) or np.any(d < 0):
+            raise CalibrationError("distances must be one finite, non-negative value per pair (m)")
+        sigma = np.broadcast_to(np.asarray(self.sigma, dtype=float), d.shape).copy()
+        if not np.all(np.isfinite(sigma)) or np.any(sigma < 0):
+            raise CalibrationError("distance sigma must be finite and non-negative (m)")
+        for name, value in (
+            ("q", q),
+            ("pairs", pairs.astype(int)),
+            ("distances", d),
+            ("sigma", sigma),
+        ):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def n_pairs(self) -> int:
+        """Number of measured distances P."""
+        return len(self.distances)
+
+
+def random_pairs(n_poses: int, n_pairs: int, seed=0) -> np.ndarray:
+    """`n_pairs` distinct pairs of different poses, (n_pairs, 2)."""
+    rng = rng_from(seed)
+    all_pairs = np.array([(i, j) for i in range(n_poses) for j in range(i + 1, n_poses)])
+    if n_pairs > len(all_pairs):
+        raise CalibrationError(f"{n_poses} poses have only {len(all_pairs)} pairs")
+    return all_pairs[rng.choice(len(all_pairs), n_pairs, replace=False)]
+
+
+def simulate_distances(true_robot: Robot, q, pairs, noise=0.0, seed=None) -> DistanceMeasurements:
+    """Distances between the tool points of `pairs` of poses of `true_robot`, with noise σ (m)."""
+    q2, _ = check_joint_values(q, true_robot.dof)
+    pairs = np.asarray(pairs, dtype=int)
+    p = true_robot.position(q2)
+    d = np.linalg.norm(p[pairs[:, 0]] - p[pairs[:, 1]], axis=1)
+    if noise:
+        d = d + rng_from(seed).normal(scale=noise, size=d.shape)
+    return DistanceMeasurements(q2, pairs, np.abs(d), noise)
+
+
+def read_distance_csv(poses_path, pairs_path, robot: Robot) -> DistanceMeasurements:
+    """Read poses (joint columns as in `casecal.read_csv`) and pairs (``i, j, distance_mm``,
+    optional ``sigma_mm``; i and j are 0-based rows of the poses file)."""
+    poses_df, poses_label = read_table(poses_path)
+    q = read_joints(poses_df, robot, poses_label)
+    df, label = read_table(pairs_path)
+    for col in ("i", "j", "distance_mm"):
+        if col not in df:
+            raise CalibrationError(f"{label}: missing column {col!r}; pairs need i, j, distance_mm")
+    ij = np.column_stack([_numbers(df, "i", label), _numbers(df, "j", label)])
+    if np.any(ij != np.round(ij)):
+        raise CalibrationError(f"{label}: i and j must be whole row numbers of the poses file")
+    sigma = _numbers(df, "sigma_mm", label) * 1e-3 if "sigma_mm" in df else 0.0
+    return DistanceMeasurements(q, ij.astype(int), _numbers(df, "distance_mm", label) * 1e-3, sigma)
+
+
+def write_distance_csv(pairs_path, measurements: DistanceMeasurements) -> None:
+    """Write the pairs file (i, j, distance_mm, sigma_mm)."""
+    from .measurement_files import write_atomic
+
+    df = pd.DataFrame(
+        {
+            "i": measurements.pairs[:, 0],
+            "j": measurements.pairs[:, 1],
+            "distance_mm": measurements.distances * 1e3,
+            "sigma_mm": measurements.sigma * 1e3,
+        }
+    )
+    write_atomic(pairs_path, df.to_csv(index=False, float_format="%.17g", lineterminator="\n"))
+
+
+class _DistanceProblem:
+    """Weighted distance residuals and Jacobians of the deviations of chosen parameters."""
+
+    def __init__(self, robot: Robot, m: DistanceMeasurements, w: np.ndarray, names):
+        self.robot, self.m, self.names = robot, m, tuple(names)
+        self.p0_robot = robot
+        self.w_flat = w
+        self.q = m.q
+        self.y = m.distances[:, None]  # for the solvers' rounding floor
+
+    def restricted(self, names):
+        return _DistanceProblem(self.robot, self.m, self.w_flat, names)
+
+    def _robot(self, x):
+        return self.robot.with_deviations(
+            dict(zip(self.names, np.asarray(x).tolist(), strict=True))
+        )
+
+    def _geometry(self, x):
+        p = self._robot(x).position(self.q)
+        v = p[self.m.pairs[:, 0]] - p[self.m.pairs[:, 1]]
+        return v, np.linalg.norm(v, axis=1)
+
+    def residual(self, x):
+        _, d = self._geometry(x)
+        return (self.m.distances - d) * self.w_flat
+
+    def jacobian(self, x):
+        v, d = self._geometry(x)
+        u = v / np.maximum(d, 1e-300)[:, None]
+        J, _ = self._robot(x).position_jacobian(self.q, list(self.names))
+        Jd = np.einsum("pi,pik->pk", u, J[self.m.pairs[:, 0]] - J[self.m.pairs[:, 1]])
+        return Jd * self.w_flat[:, None]
+
+
+def identify_distances(
+    robot: Robot,
+    measurements: DistanceMeasurements,
+    parameters=None,
+    method: str = "gauss-newton",
+    max_iterations: int = 100,
+    tolerance: float = 1e-10,
+    truth: dict | None = None,
+) -> Calibration:
+    """Identify parameter deviations from distances between tool points (see module doc).
+
+    Same methods, treatment of blind parameters and result type as `casecal.identify`;
+    `Calibration.residuals` has one row per pair (distance residual, m).
+    """
+    t0 = time.perf_counter()
+    if method not in METHODS or method == "ipopt":
+        raise CalibrationError("distance identification supports svd, gauss-newton and lm")
+    names = selection(robot, parameters)
+    if measurements.q.shape[1] != robot.dof:
+        raise CalibrationError(
+            f"poses have {measurements.q.shape[1]} joints; robot has {robot.dof}"
+        )
+    known = bool(np.all(measurements.sigma > 0))
+    w = 1.0 / measurements.sigma if known else np.ones(measurements.n_pairs)
+    full = _DistanceProblem(robot, measurements, w, names)
+    obs = analyse(full.jacobian(np.zeros(len(names))), names, measurements.n_pairs)
+    estimated = obs.base_parameters
+    if not estimated:
+        raise CalibrationError("none of the asked-for parameters changes a measured distance")
+    problem = full.restricted(estimated)
+    x, iterations, status, history, message = SOLVERS[method](
+        problem, np.zeros(len(estimated)), max_iterations=max_iterations, tolerance=tolerance
+    )
+    calibrated = problem._robot(x)
+    r = problem.residual(x)
+    cov = _covariance(problem.jacobian(x), r, known)
+    deviations = dict.fromkeys(names, 0.0)
+    deviations.update(zip(estimated, x.tolist(), strict=True))
+    se = dict.fromkeys(names, float("nan"))
+    se.update(zip(estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
+    cal = Calibration(
+        method=method,
+        nominal=robot,
+        robot=calibrated,
+        parameters=tuple(names),
+        estimated=tuple(estimated),
+        deviations=deviations,
+        standard_errors=se,
+        covariance=cov,
+        residuals=(r / w)[:, None],
+        residuals_before=full.residual(np.zeros(len(names)))[:, None] / w[:, None],
+        iterations=iterations,
+        status=status,
+        message=message or STATUS_MESSAGES[status],
+        history=tuple(float(h) for h in history),
+        observability=obs,
+        sigma_known=known,
+        wall_time=time.perf_counter() - t0,
+    )
+    return cal.compare_to(truth) if truth is not None else cal

@@ -1,0 +1,81 @@
+"""Relative measurements: distances between the tool points of pairs of poses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import casecal as cc
+from casecal.distances import (
+    DistanceMeasurements,
+    identify_distances,
+    random_pairs,
+    read_distance_csv,
+    simulate_distances,
+    write_distance_csv,
+)
+from casecal.measurement_files import write_csv
+
+
+@pytest.fixture(scope="module")
+def kr15():
+    # a tool point off the wrist axes, as a ball bar's socket is
+    return cc.load_robot("kr15_2").with_parameters({"tool_x": 0.05, "tool_y": 0.03, "tool_z": 0.1})
+
+
+def test_what_distances_cannot_see_is_found_not_assumed(kr15):
+    q = cc.poses.uniform(kr15, 60, seed=0)
+    cal = identify_distances(
+        kr15, simulate_distances(kr15, q, random_pairs(60, 300, seed=1)), "all"
+    )
+    blind = set(cal.unidentifiable)
+    # every rigid motion of the whole arm: the base frame, and also a rotation about and a
+    # slide along the first axis (theta1, d1), which the analysis finds by itself
+    assert {"base_x", "base_y", "base_z", "base_rx", "base_ry", "base_rz"} <= blind
+    assert {"theta1", "d1"} <= blind
+    # lengths keep their scale: a2, a3, d4 stay identifiable from distances alone
+    assert {"a2", "a3", "d4"} <= set(cal.observability.identifiable)
+
+
+def test_noise_free_distances_recover_the_identifiable_deviations(kr15):
+    q = cc.poses.uniform(kr15, 60, seed=0)
+    pairs = random_pairs(60, 300, seed=1)
+    visible = identify_distances(kr15, simulate_distances(kr15, q, pairs), "all").observability
+    rng = np.random.default_rng(2)
+    truth = {n: rng.normal(scale=1e-4) for n in visible.identifiable}
+    meas = simulate_distances(kr15.with_deviations(truth), q, pairs)
+    for method in ("gauss-newton", "lm"):
+        cal = identify_distances(kr15, meas, "all", method, truth=truth)
+        assert cal.success, cal.message
+        assert max(abs(e) for e in cal.errors().values()) < 1e-6
+
+
+def test_distance_files_round_trip(tmp_path, kr15):
+    q = cc.poses.uniform(kr15, 12, seed=3)
+    meas = simulate_distances(kr15, q, random_pairs(12, 30, seed=4), noise=0.01e-3, seed=5)
+    poses_csv, pairs_csv = tmp_path / "poses.csv", tmp_path / "pairs.csv"
+    write_csv(poses_csv, cc.simulate(kr15, q), kr15)  # the joints; positions are ignored
+    write_distance_csv(pairs_csv, meas)
+    again = read_distance_csv(poses_csv, pairs_csv, kr15)
+    np.testing.assert_allclose(again.q, meas.q, atol=1e-15)
+    np.testing.assert_array_equal(again.pairs, meas.pairs)
+    np.testing.assert_allclose(again.distances, meas.distances, rtol=1e-15)
+    assert header_of(pairs_csv) == "i,j,distance_mm,sigma_mm"
+
+
+def header_of(path):
+    return path.read_text().splitlines()[0]
+
+
+@pytest.mark.parametrize(
+    ("pairs", "d", "needle"),
+    [
+        ([[0, 0]], [1.0], "two different poses"),
+        ([[0, 9]], [1.0], "two different poses"),
+        ([[0, 1]], [-1.0], "non-negative"),
+        ([[0.5, 1]], [1.0], "integers"),
+    ],
+)
+def test_bad_pairs(pairs, d, needle):
+    with pytest.raises(cc.CalibrationError, match=needle):
+        DistanceMeasurements(np.zeros((3, 6)), np.array(pairs), d, 0.0)
