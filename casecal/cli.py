@@ -94,6 +94,8 @@ def parse_angle(text: str) -> float:
 
 def _cmd_identify(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
+    if args.pairs:
+        return _identify_distances(args, robot)
     meas = read_csv(args.measurements, robot)
     for out in (args.output, args.deviations_out):
         if out is not None and not out.strip():
@@ -136,6 +138,26 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     if args.deviations_out:
         write_atomic(args.deviations_out, _deviations_text(cal, args.deviations_out))
         print(f"deviations with standard errors written to {args.deviations_out}")
+
+
+def _identify_distances(args: argparse.Namespace, robot) -> None:
+    from .distances import identify_distances, read_distance_csv
+
+    if args.output:
+        _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
+    meas = read_distance_csv(args.measurements, args.pairs, robot)
+    method = "gauss-newton" if args.method == "ipopt" else args.method
+    cal = identify_distances(
+        robot, meas, args.parameters, method, max_iterations=args.max_iterations
+    )
+    print(f"{meas.n_pairs} distances between {len(meas.q)} poses")
+    print(cal.summary())
+    if not cal.success:
+        raise CalibrationError(f"the fit did not converge ({cal.message}); nothing written")
+    if args.output:
+        calibrated = dataclasses.replace(cal.robot, calibrated_from=args.robot, auto_beta=False)
+        write_atomic(args.output, robot_to_toml(calibrated))
+        print(f"\ncalibrated robot written to {args.output}")
 
 
 def _deviations_text(cal, path: str) -> str:
@@ -475,6 +497,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--deviations-out",
         metavar="FILE",
         help="write deviations and standard errors as .json or .csv",
+    )
+    p.add_argument(
+        "--pairs",
+        metavar="CSV",
+        help="relative measurements: CSV of i, j, distance_mm (0-based rows of the measurement "
+        "file, whose positions are then not needed)",
     )
     p.add_argument(
         "--strict",

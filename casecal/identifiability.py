@@ -124,7 +124,9 @@ class Observability:
         return "\n".join(lines)
 
 
-def observability(robot: Robot, q, parameters=None, measurement="position"):
+def observability(
+    robot: Robot, q, parameters=None, measurement="position", orientation_weight: float = 0.1
+):
     """Which parameters a set of poses can identify, and which combinations it cannot.
 
     Parameters
@@ -136,17 +138,27 @@ def observability(robot: Robot, q, parameters=None, measurement="position"):
     parameters : str or list of str
         Names, families or ``"all"`` (see `casecal.parameters.select`). Default None: the
         paper's set θ, a, d.
-    measurement : {"position"}
-        What is measured at each pose.
+    measurement : {"position", "pose"}
+        What is measured at each pose: the tool point, or the tool point and the tool's
+        orientation (full pose).
+    orientation_weight : float
+        For ``"pose"``: metres per radian that make an orientation error comparable to a
+        position error (default 0.1: 1 mrad weighs like 0.1 mm).
 
     Returns
     -------
     Observability
     """
-    if measurement != "position":
-        raise CalibrationError(f"measurement {measurement!r} is not supported; use 'position'")
+    if measurement not in ("position", "pose"):
+        raise CalibrationError(
+            f"measurement {measurement!r} is not supported; use 'position' or 'pose'"
+        )
     q2, _ = check_joint_values(q, robot.dof)
-    J, names = robot.position_jacobian(q2, selection(robot, parameters))
+    if measurement == "position":
+        J, names = robot.position_jacobian(q2, selection(robot, parameters))
+    else:
+        J, names = robot.pose_jacobian(q2, selection(robot, parameters))
+        J = np.concatenate([J[:, :3], orientation_weight * J[:, 3:]], axis=1)
     return analyse(J.reshape(-1, len(names)), names, n_poses=q2.shape[0])
 
 

@@ -24,3 +24,11 @@ def test_identifiable_counts_of_six_axis_arms(name):
     assert position.observability.rank == 27
     assert pose.observability.rank == 30
     assert len(pose.estimated) == 30 and len(position.estimated) == 27
+
+
+@pytest.mark.parametrize("name", ["puma560", "rx90b", "kr15_2", "ur5e"])
+def test_observability_counts_for_position_and_pose(name):
+    robot = cc.load_robot(name).with_parameters({"tool_x": 0.05, "tool_y": 0.03, "tool_z": 0.1})
+    q = cc.poses.uniform(robot, 80, seed=0)
+    assert cc.observability(robot, q, "all").rank == 27
+    assert cc.observability(robot, q, "all", measurement="pose").rank == 30
