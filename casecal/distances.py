@@ -18,7 +18,7 @@ import pandas as pd
 from .calibration import STATUS_MESSAGES, Calibration
 from .errors import CalibrationError
 from .identifiability import analyse, selection
-from .identification import METHODS, _covariance
+from .identification import METHODS, uncertainty
 from .measurement_files import _numbers, read_joints, read_table
 from .poses import rng_from
 from .robot import Robot, check_joint_values
@@ -199,11 +199,9 @@ def identify_distances(
     )
     calibrated = problem._robot(x)
     r = problem.residual(x)
-    cov = _covariance(problem.jacobian(x), r, known)
+    cov, se = uncertainty(problem.jacobian(x), r, known, names, estimated)
     deviations = dict.fromkeys(names, 0.0)
     deviations.update(zip(estimated, x.tolist(), strict=True))
-    se = dict.fromkeys(names, float("nan"))
-    se.update(zip(estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
     cal = Calibration(
         method=method,
         nominal=robot,

@@ -194,9 +194,7 @@ def identify(
     r_after = problem.residual(x)
     J = problem.jacobian(x)
     prior_w = np.array([1.0 / prior[n] if n in prior else 0.0 for n in estimated])
-    cov = _covariance(J, r_after, known, prior_w)
-    se = dict.fromkeys(names, float("nan"))
-    se.update(zip(estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
+    cov, se = uncertainty(J, r_after, known, names, estimated, prior_w)
     cal = Calibration(
         method=method,
         nominal=robot,
@@ -412,6 +410,15 @@ def _check_prior(prior: dict) -> dict:
             )
         out[name] = sd
     return out
+
+
+def uncertainty(J, r, known: bool, names, estimated, prior_w=None) -> tuple[np.ndarray, dict]:
+    """Covariance of the estimated deviations and standard errors of all asked-for names
+    (NaN for those held), from the weighted Jacobian `J` and residuals `r` at the solution."""
+    cov = _covariance(J, r, known, prior_w)
+    se = dict.fromkeys(names, float("nan"))
+    se.update(zip(estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
+    return cov, se
 
 
 def _covariance(J: np.ndarray, r: np.ndarray, known: bool, prior_w=None) -> np.ndarray:
