@@ -43,3 +43,26 @@ def test_campaign_from_a_pool_of_measured_poses():
     run = calibrate_until(robot, measure, threshold=0.08e-3, candidates=candidates)
     assert run.reached and run.n_poses < 100
     assert set(map(tuple, run.measurements.q)) <= set(map(tuple, pool.q))
+
+
+def test_a_model_that_does_not_fit_cannot_claim_the_threshold():
+    """A pool measured in a far instrument frame, fitted without frame parameters: the
+    covariance alone would promise a small error; the residuals say otherwise."""
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"base_x": 2.0, "base_rz": 1.0, "a2": 2e-4})
+    pool = cc.simulate(true, cc.poses.uniform(robot, 200, seed=1), noise=SIGMA, seed=2)
+    candidates, measure = pool_measure(pool)
+    run = calibrate_until(robot, measure, threshold=0.1e-3, candidates=candidates, max_poses=30)
+    assert not run.reached
+
+
+def test_no_pose_is_measured_twice():
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 2e-4})
+    pool = cc.simulate(true, cc.poses.uniform(robot, 80, seed=1), noise=0.3e-3, seed=2)
+    candidates, measure = pool_measure(pool)
+    for order in ("optimal", "uniform"):
+        run = calibrate_until(
+            robot, measure, threshold=1e-6, order=order, candidates=candidates, max_poses=60
+        )
+        assert len({tuple(row) for row in run.measurements.q}) == run.n_poses
