@@ -95,6 +95,24 @@ def parse_angle(text: str) -> float:
 def _cmd_identify(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
     if args.pairs:
+        unsupported = [
+            flag
+            for flag, value in (
+                ("--holdout", args.holdout),
+                ("--strict", args.strict),
+                ("--loss", args.loss != "linear"),
+                ("--deviations-out", args.deviations_out),
+                ("--orientation-sigma", args.orientation_sigma),
+                ("--truth", args.truth),
+                ("--noise", args.noise),
+                ("--method ipopt", args.method == "ipopt"),
+            )
+            if value
+        ]
+        if unsupported:
+            raise CalibrationError(
+                f"{', '.join(unsupported)} cannot be used with --pairs (distance measurements)"
+            )
         return _identify_distances(args, robot)
     meas = read_csv(args.measurements, robot)
     for out in (args.output, args.deviations_out):

@@ -57,10 +57,17 @@ class DistanceMeasurements:
             raise CalibrationError(
                 f"pair indices must name two different poses among 0 … {len(q) - 1}"
             )
-        d = np.asarray(self.distances, dtype=float)
+        try:
+            d = np.asarray(self.distances, dtype=float)
+            sigma_in = np.asarray(self.sigma, dtype=float)
+        except (TypeError, ValueError):
+            raise CalibrationError("distances and sigma must be numbers (m)") from None
         if d.shape != (len(pairs),) or not np.all(np.isfinite(d)) or np.any(d < 0):
             raise CalibrationError("distances must be one finite, non-negative value per pair (m)")
-        sigma = np.broadcast_to(np.asarray(self.sigma, dtype=float), d.shape).copy()
+        try:
+            sigma = np.broadcast_to(sigma_in, d.shape).copy()
+        except ValueError:
+            raise CalibrationError("distance sigma must be one value or one per pair (m)") from None
         if not np.all(np.isfinite(sigma)) or np.any(sigma < 0):
             raise CalibrationError("distance sigma must be finite and non-negative (m)")
         for name, value in (
@@ -80,6 +87,10 @@ class DistanceMeasurements:
 
 def random_pairs(n_poses: int, n_pairs: int, seed=0) -> np.ndarray:
     """`n_pairs` distinct pairs of different poses, (n_pairs, 2)."""
+    if not all(
+        isinstance(v, int | np.integer) and not isinstance(v, bool) for v in (n_poses, n_pairs)
+    ):
+        raise CalibrationError("n_poses and n_pairs must be integers")
     rng = rng_from(seed)
     all_pairs = np.array([(i, j) for i in range(n_poses) for j in range(i + 1, n_poses)])
     if n_pairs > len(all_pairs):
@@ -90,7 +101,11 @@ def random_pairs(n_poses: int, n_pairs: int, seed=0) -> np.ndarray:
 def simulate_distances(true_robot: Robot, q, pairs, noise=0.0, seed=None) -> DistanceMeasurements:
     """Distances between the tool points of `pairs` of poses of `true_robot`, with noise σ (m)."""
     q2, _ = check_joint_values(q, true_robot.dof)
-    pairs = np.asarray(pairs, dtype=int)
+    pairs = np.asarray(pairs)
+    if pairs.ndim != 2 or pairs.shape[1] != 2 or not np.issubdtype(pairs.dtype, np.integer):
+        raise CalibrationError("pairs must be integer pose indices of shape (P, 2)")
+    if pairs.min() < 0 or pairs.max() >= len(q2):
+        raise CalibrationError(f"pair indices must lie in 0 … {len(q2) - 1}")
     p = true_robot.position(q2)
     d = np.linalg.norm(p[pairs[:, 0]] - p[pairs[:, 1]], axis=1)
     if noise:
@@ -188,9 +203,22 @@ def identify_distances(
         )
     known = bool(np.all(measurements.sigma > 0))
     w = 1.0 / measurements.sigma if known else np.ones(measurements.n_pairs)
+    if (
+        isinstance(max_iterations, bool)
+        or not isinstance(max_iterations, int)
+        or max_iterations < 1
+    ):
+        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if not (isinstance(tolerance, int | float) and 0 < tolerance < 1):
+        raise CalibrationError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
     full = _DistanceProblem(robot, measurements, w, names)
     obs = analyse(full.jacobian(np.zeros(len(names))), names, measurements.n_pairs)
     estimated = obs.base_parameters
+    if obs.rank >= measurements.n_pairs and len(names) > obs.rank:
+        raise CalibrationError(
+            f"{measurements.n_pairs} distances are fewer than the {len(names)} parameters asked "
+            "for, so they cannot tell which are blind; measure more pairs"
+        )
     if not estimated:
         raise CalibrationError("none of the asked-for parameters changes a measured distance")
     problem = full.restricted(estimated)

@@ -138,6 +138,21 @@ def identify(
     R_meas = measurements.orientations
     if orientation_sigma is None:
         orientation_sigma = measurements.orientation_sigma
+    if orientation_sigma is not None:
+        try:
+            orientation_sigma = float(orientation_sigma)
+        except (TypeError, ValueError):
+            raise CalibrationError(
+                f"orientation_sigma {orientation_sigma!r} is not a number (rad)"
+            ) from None
+        if not (np.isfinite(orientation_sigma) and orientation_sigma >= 0):
+            raise CalibrationError("orientation_sigma must be finite and non-negative (rad)")
+        if orientation_sigma > 0 and not known and R_meas is not None:
+            # positions would weigh 1 per metre against 1/σ_rot per radian: ignored
+            raise CalibrationError(
+                "an orientation sigma needs the position sigma too (noise=... or a sigma_mm "
+                "column); or give neither, and 1 mrad weighs like 0.1 mm"
+            )
     if orientation_sigma:
         w_rot = 1.0 / orientation_sigma
     else:  # stated default: 1 mrad weighs like 0.1 mm
@@ -157,7 +172,7 @@ def identify(
         kwargs.update(bounds=bounds, prior=prior)
     if loss not in LOSSES:
         raise CalibrationError(f"unknown loss {loss!r}; use one of {', '.join(LOSSES)}")
-    if not (np.isfinite(loss_scale) and loss_scale > 0):
+    if not isinstance(loss_scale, int | float) or not (np.isfinite(loss_scale) and loss_scale > 0):
         raise CalibrationError(f"loss_scale must be a positive number, got {loss_scale!r}")
     obs, estimated = _analyse(make(start, names=names))
     base_problem = make(start, names=names).restricted(estimated)

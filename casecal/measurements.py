@@ -76,14 +76,22 @@ class Measurements:
         sigma = broadcast_sigma(self.sigma, q.shape[0])
         values = [("q", q), ("positions", y), ("sigma", sigma)]
         if self.orientations is not None:
-            R = np.asarray(self.orientations, dtype=float)
+            try:
+                R = np.asarray(self.orientations, dtype=float)
+            except (TypeError, ValueError):
+                raise CalibrationError("orientations are not numbers") from None
             if R.shape != (q.shape[0], 3, 3) or not np.all(np.isfinite(R)):
                 raise CalibrationError(f"orientations must be ({q.shape[0]}, 3, 3) rotations")
-            if np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max() > 1e-6:
-                raise CalibrationError("orientations are not rotation matrices (R Rᵀ != I)")
+            if np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max() > 1e-6 or np.any(
+                np.linalg.det(R) < 0
+            ):
+                raise CalibrationError("orientations are not rotations (R Rᵀ != I or det R < 0)")
             values.append(("orientations", R))
         if self.orientation_sigma is not None:
-            sd = float(self.orientation_sigma)
+            try:
+                sd = float(self.orientation_sigma)
+            except (TypeError, ValueError):
+                raise CalibrationError("orientation sigma is not a number (rad)") from None
             if not (np.isfinite(sd) and sd >= 0):
                 raise CalibrationError("orientation sigma must be finite and non-negative (rad)")
             object.__setattr__(self, "orientation_sigma", sd)
@@ -108,18 +116,20 @@ class Measurements:
 
 
 def rotation_vector(R: np.ndarray) -> np.ndarray:
-    """``vee(log(R))`` for rotations R (..., 3, 3): axis times angle, rad, shape (..., 3)."""
+    """``vee(log(R))`` for rotations R (..., 3, 3): axis times angle, rad, shape (..., 3).
+
+    Through the unit quaternion (w ≥ 0): angle = 2 atan2(|v|, w), exact up to π, where the
+    trace formula loses the axis.
+    """
+    from .frames import quaternion_from_matrix
+
     R = np.asarray(R, dtype=float)
-    cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)
-    angle = np.arccos(cos)
-    w = np.stack(
-        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-        axis=-1,
-    )
-    s = np.sin(angle)
-    # angle / (2 sin angle) -> 1/2 as angle -> 0; near pi the residuals of a fit are small
-    factor = np.where(s > 1e-8, angle / np.where(s > 1e-8, 2 * s, 1.0), 0.5)
-    return w * factor[..., None]
+    quat = quaternion_from_matrix(R.reshape(-1, 3, 3))
+    w, v = quat[:, 0], quat[:, 1:]
+    s = np.linalg.norm(v, axis=1)
+    angle = 2.0 * np.arctan2(s, w)
+    factor = np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0 / np.maximum(w, 1e-300))
+    return (v * factor[:, None]).reshape(R.shape[:-1])
 
 
 def rotation_from_vector(w: np.ndarray) -> np.ndarray:
@@ -169,6 +179,8 @@ def simulate(true_robot: Robot, q, noise=0.0, seed=None, orientation_noise=None)
     positions = points if true_robot.points else points[:, 0, :]
     R = None
     if orientation_noise is not None:
+        if not isinstance(orientation_noise, int | float) or not orientation_noise >= 0:
+            raise CalibrationError("orientation_noise must be a non-negative number (rad)")
         R = true_robot.fk(q2)[:, :3, :3]
         if orientation_noise > 0:
             R = rotation_from_vector(rng.normal(scale=orientation_noise, size=(len(q2), 3))) @ R

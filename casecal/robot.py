@@ -244,6 +244,10 @@ class Robot:
 
     def with_points(self, points) -> Robot:
         """A new Robot measured at `points` (tool frame, m, shape (m, 3)); () for the origin."""
+        try:
+            points = np.asarray(points, dtype=float).reshape(-1, 3)
+        except (TypeError, ValueError):
+            raise CalibrationError("points must be numbers, shape (m, 3), in m") from None
         return dataclasses.replace(
             self, points=tuple(map(tuple, np.asarray(points, float))), auto_beta=False
         )

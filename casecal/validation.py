@@ -58,10 +58,12 @@ def refit_frames(robot: Robot, measurements: Measurements) -> ErrorStats:
     """Errors of `robot` on `measurements` after fitting its frames alone to them."""
     try:
         cal = identify(robot, measurements, list(FRAME_PARAMETERS), "gauss-newton")
-    except CalibrationError:
-        # too few held-out poses for the frames: compare as it stands
-        res = measurements.points - robot.measured_points(measurements.q)
-        return ErrorStats.of(res)
+    except CalibrationError as exc:
+        raise CalibrationError(
+            f"cannot refit the frames to the held-out data ({exc}); measure more poses"
+        ) from None
+    if not cal.success:
+        raise CalibrationError(f"the frames did not fit the held-out data: {cal.message}")
     return ErrorStats.of(cal.residuals)
 
 
@@ -87,7 +89,7 @@ def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> V
 
 def split(measurements: Measurements, fraction: float, seed=0):
     """Random (fit, held-out) split of the poses; `fraction` of them are held out."""
-    if not 0 < fraction < 1:
+    if not isinstance(fraction, int | float) or not 0 < fraction < 1:
         raise CalibrationError(f"holdout fraction must be between 0 and 1, got {fraction}")
     n = measurements.n_poses
     k = round(fraction * n)

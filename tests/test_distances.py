@@ -79,3 +79,23 @@ def header_of(path):
 def test_bad_pairs(pairs, d, needle):
     with pytest.raises(cc.CalibrationError, match=needle):
         DistanceMeasurements(np.zeros((3, 6)), np.array(pairs), d, 0.0)
+
+
+def test_too_few_distances_are_refused(kr15):
+    q = cc.poses.uniform(kr15, 6, seed=0)
+    meas = simulate_distances(kr15, q, random_pairs(6, 3, seed=1))
+    with pytest.raises(cc.CalibrationError, match="fewer than"):
+        identify_distances(kr15, meas)
+
+
+def test_cli_pairs_rejects_options_it_cannot_honour(tmp_path, kr15, capsys):
+    from casecal.cli import main
+
+    q = cc.poses.uniform(kr15, 12, seed=3)
+    poses_csv, pairs_csv = tmp_path / "poses.csv", tmp_path / "pairs.csv"
+    write_csv(poses_csv, cc.simulate(kr15, q), kr15)
+    write_distance_csv(pairs_csv, simulate_distances(kr15, q, random_pairs(12, 40, seed=4)))
+    argv = ["identify", "kr15_2", str(poses_csv), "--pairs", str(pairs_csv)]
+    assert main([*argv, "--holdout", "0.2", "--loss", "huber"]) == 2
+    err = capsys.readouterr().err
+    assert "--holdout" in err and "--loss" in err and err.count("\n") == 1

@@ -143,3 +143,35 @@ def test_calibrated_robot_file_reproduces_the_calibrated_positions(tmp_path):
     np.testing.assert_allclose(
         again.measured_points(q_new), cal.robot.measured_points(q_new), rtol=0, atol=1e-12
     )
+
+
+def test_rotation_vector_up_to_pi():
+    from casecal.measurements import rotation_from_vector, rotation_vector
+
+    rng = np.random.default_rng(0)
+    axes = rng.normal(size=(50, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    for angle in (1e-9, 0.3, np.pi - 1e-6, np.pi - 1e-9):
+        w = axes * angle
+        back = rotation_vector(rotation_from_vector(w))
+        # at exactly pi the sign of the axis is a convention; away from it, exact
+        np.testing.assert_allclose(np.linalg.norm(back, axis=1), angle, rtol=1e-6, atol=1e-12)
+        if angle < 3:
+            np.testing.assert_allclose(back, w, atol=1e-9)
+
+
+def test_orientation_sigma_needs_position_sigma_and_rotations_are_proper():
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 20, seed=0)
+    meas = cc.simulate(robot, q, orientation_noise=0.0)
+    with pytest.raises(cc.CalibrationError, match="position sigma too"):
+        cc.identify(robot, meas, orientation_sigma=1e-4)
+    with pytest.raises(cc.CalibrationError, match="det"):
+        cc.Measurements(q, meas.positions, 0.0, orientations=np.tile(-np.eye(3), (20, 1, 1)))
+
+
+def test_validation_refuses_to_compare_across_frames():
+    robot = cc.load_robot("puma560")
+    two = cc.simulate(robot.with_deviations({"base_x": 2.0}), cc.poses.uniform(robot, 2, seed=0))
+    with pytest.raises(cc.CalibrationError, match="refit the frames"):
+        cc.validate(robot, two, robot)
