@@ -20,7 +20,7 @@ STATUS_MESSAGES = {
     0: "stopped: maximum number of iterations reached",
     1: "done: one-shot linearised solution (the paper's SVD step)",
     2: "converged: the step fell below the tolerance",
-    3: "converged: the cost no longer decreases (rounding floor)",
+    3: "stopped: the cost no longer decreases",
     4: "converged: residuals are at the rounding floor of the data",
     5: "converged: the solver's optimality tolerance was met",
 }
@@ -162,6 +162,14 @@ class Calibration:
         return tuple(
             n for n in self.estimated if not self.standard_errors[n] <= POORLY_DETERMINED[unit(n)]
         )
+
+    @property
+    def reduced_chi2(self) -> float:
+        """Σ (r/σ)² / dof at the solution: about 1 when model and stated σ are right; NaN
+        without a stated σ or residual degrees of freedom."""
+        if not self.sigma_known or self.dof_residual <= 0:
+            return float("nan")
+        return 2.0 * self.history[-1] / self.dof_residual
 
     @property
     def dof_residual(self) -> int:

@@ -87,14 +87,8 @@ def predicted_error(cal: Calibration, q_holdout: np.ndarray, level: float = 0.95
     cov = np.einsum("nik,kl,njl->nij", J, cal.covariance, J)  # (N, 3, 3)
     lam = np.clip(np.linalg.eigvalsh(cov), 0.0, None)  # (N, 3)
     radius = np.quantile(np.sqrt((_Z**2) @ lam.T), level, axis=0)  # (N,)
-    return float(np.quantile(radius, level)) * np.sqrt(max(1.0, reduced_chi2(cal)))
-
-
-def reduced_chi2(cal: Calibration) -> float:
-    """Σ (r/σ)² / dof of the fit (1 for a right model and right σ); 1 without a stated σ."""
-    if not cal.sigma_known or cal.dof_residual <= 0:
-        return 1.0
-    return 2.0 * cal.history[-1] / cal.dof_residual
+    chi2 = cal.reduced_chi2
+    return float(np.quantile(radius, level)) * np.sqrt(max(1.0, 0.0 if np.isnan(chi2) else chi2))
 
 
 def calibrate_until(
@@ -194,7 +188,7 @@ def calibrate_until(
             raise CalibrationError(
                 "measure(q) must return a Measurements with one row per requested pose"
             )
-        meas = got if meas is None else _concat(meas, got)
+        meas = got if meas is None else meas.concat(got)
         try:
             cal = identify(robot, meas, parameters, method)
             pred = predicted_error(cal, q_hold) if cal.success else np.inf
@@ -215,24 +209,6 @@ def pool_measure(pool: Measurements) -> tuple[np.ndarray, Callable]:
     """Candidates and a `measure` that looks requested poses up in measured `pool`."""
 
     def measure(q):
-        idx = [int(np.flatnonzero(np.all(pool.q == row, axis=1))[0]) for row in q]
-        return Measurements(
-            pool.q[idx],
-            pool.positions[idx],
-            pool.sigma[idx],
-            None if pool.orientations is None else pool.orientations[idx],
-            pool.orientation_sigma,
-        )
+        return pool.take([int(np.flatnonzero(np.all(pool.q == row, axis=1))[0]) for row in q])
 
     return pool.q.copy(), measure
-
-
-def _concat(a: Measurements, b: Measurements) -> Measurements:
-    orient = None if a.orientations is None else np.concatenate([a.orientations, b.orientations])
-    return Measurements(
-        np.vstack([a.q, b.q]),
-        np.concatenate([a.positions, b.positions]),
-        np.vstack([a.sigma, b.sigma]),
-        orient,
-        a.orientation_sigma,
-    )

@@ -149,10 +149,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         print(validate(cal.robot, held, robot))
     if not cal.success:
         raise CalibrationError(f"the fit did not converge ({cal.message}); nothing written")
-    if args.output:
-        calibrated = dataclasses.replace(cal.robot, calibrated_from=args.robot, auto_beta=False)
-        write_atomic(args.output, robot_to_toml(calibrated))
-        print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
+    _write_calibrated(args, cal.robot)
     if args.deviations_out:
         write_atomic(args.deviations_out, _deviations_text(cal, args.deviations_out))
         print(f"deviations with standard errors written to {args.deviations_out}")
@@ -172,10 +169,15 @@ def _identify_distances(args: argparse.Namespace, robot) -> None:
     print(cal.summary())
     if not cal.success:
         raise CalibrationError(f"the fit did not converge ({cal.message}); nothing written")
+    _write_calibrated(args, cal.robot)
+
+
+def _write_calibrated(args: argparse.Namespace, robot) -> None:
+    """Write -o's calibrated robot file, recording which nominal it came from."""
     if args.output:
-        calibrated = dataclasses.replace(cal.robot, calibrated_from=args.robot, auto_beta=False)
+        calibrated = dataclasses.replace(robot, calibrated_from=args.robot, auto_beta=False)
         write_atomic(args.output, robot_to_toml(calibrated))
-        print(f"\ncalibrated robot written to {args.output}")
+        print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
 
 
 def _deviations_text(cal, path: str) -> str:
@@ -229,12 +231,7 @@ def _cmd_calibrate_until(args: argparse.Namespace) -> None:
             f"the pool's poses did not reach {args.threshold} (predicted "
             f"{run.predicted * 1e3:.3f} mm); nothing written"
         )
-    if args.output:
-        calibrated = dataclasses.replace(
-            run.calibration.robot, calibrated_from=args.robot, auto_beta=False
-        )
-        write_atomic(args.output, robot_to_toml(calibrated))
-        print(f"\ncalibrated robot written to {args.output}")
+    _write_calibrated(args, run.calibration.robot)
 
 
 def _cmd_validate(args: argparse.Namespace) -> None:

@@ -3,12 +3,15 @@
 Every method solves the same weighted least-squares problem in the deviations ``x`` of the
 estimated parameters::
 
-    minimise  0.5 Σ_i Σ_axis ((y_i - f(q_i, p0 + x)) / σ_i,axis)²
+    minimise  0.5 Σ_i Σ_rows (r_i,row(p0 + x) / σ_i,row)²
 
-with ``f`` the tool-point position. Columns of the Jacobian are scaled to unit norm before
-any factorisation, so metres and radians do not decide the rank. Parameters the poses cannot
-separate are found first (`casecal.observability`); a base set of the identifiable ones is
-estimated and the rest are held at nominal and reported, never given arbitrary values.
+whose rows per pose are the measured points' coordinates, ``y - f(q, p)`` (m), and, when
+orientations were measured, the rotation vector ``log(R_meas R(q, p)ᵀ)`` (rad). Columns
+of the Jacobian are scaled to unit norm before any factorisation, so metres and radians
+do not decide the rank. Parameters the poses cannot separate are found first
+(`casecal.observability`); a base set of the identifiable ones is estimated and the rest
+are held at nominal (or at the start of the fit) and reported, never given arbitrary
+values.
 """
 
 from __future__ import annotations

@@ -114,6 +114,35 @@ class Measurements:
         """Measured points per pose, m."""
         return self.points.shape[1]
 
+    def take(self, index) -> Measurements:
+        """The measurements of the poses `index` (indices or a boolean mask)."""
+        return Measurements(
+            self.q[index],
+            self.positions[index],
+            self.sigma[index],
+            None if self.orientations is None else self.orientations[index],
+            self.orientation_sigma,
+        )
+
+    def concat(self, other: Measurements) -> Measurements:
+        """These measurements followed by `other`'s (same robot and kind)."""
+        if (self.orientations is None) != (other.orientations is None) or (
+            self.positions.shape[1:] != other.positions.shape[1:]
+        ):
+            raise CalibrationError("cannot join measurements of different kinds")
+        orient = (
+            None
+            if self.orientations is None
+            else np.concatenate([self.orientations, other.orientations])
+        )
+        return Measurements(
+            np.vstack([self.q, other.q]),
+            np.concatenate([self.positions, other.positions]),
+            np.vstack([self.sigma, other.sigma]),
+            orient,
+            self.orientation_sigma,
+        )
+
 
 def rotation_vector(R: np.ndarray) -> np.ndarray:
     """``vee(log(R))`` for rotations R (..., 3, 3): axis times angle, rad, shape (..., 3).

@@ -107,6 +107,13 @@ def _notes(cal: Calibration) -> list[str]:
         notes.append(f"The fit did not converge: {cal.message}. Do not use these values.")
     if cal.start_note:
         notes.append(cal.start_note)
+    chi2 = cal.reduced_chi2
+    if chi2 > 4:
+        notes.append(
+            f"The residuals are {np.sqrt(chi2):.1f}× the stated noise (reduced χ² = {chi2:.3g}): "
+            "the model does not fit these data (a parameter missing from the set, a wrong "
+            "frame, outliers or a wrong sigma). Do not trust these values as they are."
+        )
     if cal.loss != "linear":
         notes.append(f"Robust fit: {cal.loss} loss, by iteratively reweighted least squares.")
     if cal.outliers:

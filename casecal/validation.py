@@ -98,15 +98,4 @@ def split(measurements: Measurements, fraction: float, seed=0):
     held = np.zeros(n, bool)
     held[rng_from(seed).choice(n, size=k, replace=False)] = True
 
-    def take(mask):
-        return Measurements(
-            q=measurements.q[mask],
-            positions=measurements.positions[mask],
-            sigma=measurements.sigma[mask],
-            orientations=None
-            if measurements.orientations is None
-            else measurements.orientations[mask],
-            orientation_sigma=measurements.orientation_sigma,
-        )
-
-    return take(~held), take(held)
+    return measurements.take(~held), measurements.take(held)
