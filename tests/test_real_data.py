@@ -175,3 +175,14 @@ def test_validation_refuses_to_compare_across_frames():
     two = cc.simulate(robot.with_deviations({"base_x": 2.0}), cc.poses.uniform(robot, 2, seed=0))
     with pytest.raises(cc.CalibrationError, match="refit the frames"):
         cc.validate(robot, two, robot)
+
+
+def test_summary_says_when_the_model_does_not_fit_the_noise():
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"base_x": 0.01, "a2": 2e-4})  # a base offset not asked for
+    meas = cc.simulate(true, cc.poses.uniform(robot, 40, seed=0), noise=SIGMA, seed=1)
+    cal = cc.identify(robot, meas, ["theta*", "a*"], "gauss-newton")
+    assert cal.reduced_chi2 > 4
+    assert "reduced χ²" in str(cal.summary())
+    fine = cc.identify(robot, meas, "all", "gauss-newton")
+    assert fine.reduced_chi2 < 2 and "reduced χ²" not in str(fine.summary())
