@@ -184,5 +184,6 @@ def test_summary_says_when_the_model_does_not_fit_the_noise():
     cal = cc.identify(robot, meas, ["theta*", "a*"], "gauss-newton")
     assert cal.reduced_chi2 > 4
     assert "reduced χ²" in str(cal.summary())
-    fine = cc.identify(robot, meas, "all", "gauss-newton")
+    # with the base frame asked for, the same data fit down to the noise
+    fine = cc.identify(robot, meas, ["theta*", "d*", "a*", "alpha*", "base_*"], "gauss-newton")
     assert fine.reduced_chi2 < 2 and "reduced χ²" not in str(fine.summary())
