@@ -149,7 +149,6 @@ class _DistanceProblem:
 
     def __init__(self, robot: Robot, m: DistanceMeasurements, w: np.ndarray, names):
         self.robot, self.m, self.names = robot, m, tuple(names)
-        self.p0_robot = robot
         self.w_flat = w
         self.q = m.q
         self.y = m.distances[:, None]  # for the solvers' rounding floor
