@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 import casecal as cc
-from casecal.poses import _greedy
+from casecal.design.poses import _greedy
 
 
 def naive_greedy(J: np.ndarray, n: int) -> list[int]:

@@ -15,15 +15,16 @@ import warnings
 
 import numpy as np
 
-from . import __version__, poses
-from .catalog import load_deviations, load_robot, robot_to_toml, robots
+from . import __version__
+from .data.files import read_csv, write_atomic, write_csv
+from .data.measurements import simulate
+from .design import poses
 from .errors import CalibrationError
-from .identifiability import observability
-from .identification import METHODS, identify
-from .measurement_files import read_csv, write_atomic, write_csv
-from .measurements import simulate
-from .parameters import unit
-from .validation import split, validate
+from .identification.analysis import observability
+from .identification.fit import METHODS, identify
+from .identification.validation import split, validate
+from .model.catalog import load_deviations, load_robot, robot_to_toml, robots
+from .model.parameters import unit
 
 _LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
 
@@ -156,7 +157,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
 
 
 def _identify_distances(args: argparse.Namespace, robot) -> None:
-    from .distances import identify_distances, read_distance_csv
+    from .identification.distances import identify_distances, read_distance_csv
 
     if args.output:
         _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
@@ -206,7 +207,7 @@ def _deviations_text(cal, path: str) -> str:
 
 
 def _cmd_calibrate_until(args: argparse.Namespace) -> None:
-    from .campaign import calibrate_until, pool_measure
+    from .design.campaign import calibrate_until, pool_measure
 
     robot = load_robot(args.robot)
     pool = read_csv(args.pool, robot)

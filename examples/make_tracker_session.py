@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 import casecal as cc
-from casecal.measurement_files import write_csv
+from casecal.data.files import write_csv
 
 robot = cc.load_robot("puma560")
 rng = np.random.default_rng(2026)

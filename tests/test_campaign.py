@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 import casecal as cc
-from casecal.campaign import calibrate_until, pool_measure
-from casecal.study import Grid, truth_for
+from casecal.design.campaign import calibrate_until, pool_measure
+from casecal.studies.engine import Grid, truth_for
 
 SIGMA = 0.02e-3
 

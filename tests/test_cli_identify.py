@@ -7,7 +7,7 @@ import pytest
 
 import casecal as cc
 from casecal.cli import main, parse_length
-from casecal.measurement_files import read_csv, write_csv
+from casecal.data.files import read_csv, write_csv
 
 DEVIATIONS = """\
 length_unit = "mm"

@@ -10,7 +10,7 @@ import numpy as np
 
 import casecal as cc
 from casecal.cli import main
-from casecal.measurement_files import write_csv
+from casecal.data.files import write_csv
 
 EXAMPLE = Path(__file__).parents[1] / "examples" / "tracker_session.csv"
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import casecal as cc
-from casecal.distances import (
+from casecal.data.files import write_csv
+from casecal.identification.distances import (
     DistanceMeasurements,
     identify_distances,
     random_pairs,
@@ -14,7 +15,6 @@ from casecal.distances import (
     simulate_distances,
     write_distance_csv,
 )
-from casecal.measurement_files import write_csv
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from spatialmath import SE3
 
 import casecal as cc
-from casecal.catalog import robot_from_dict
+from casecal.model.catalog import robot_from_dict
 
 TOL = 1e-12  # metres (and dimensionless for rotation entries)
 

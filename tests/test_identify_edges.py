@@ -7,7 +7,7 @@ import pytest
 
 import casecal as cc
 from casecal.cli import main
-from casecal.measurement_files import read_csv
+from casecal.data.files import read_csv
 
 DH = ["theta*", "d*", "a*", "alpha*"]
 

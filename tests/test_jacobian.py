@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import casecal as cc
-from casecal.catalog import robot_from_dict
+from casecal.model.catalog import robot_from_dict
 
 REL_TOL = 1e-6
 STEP = 1e-5  # m or rad: truncation ~STEP**2, rounding ~1e-16/STEP, both far below REL_TOL

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
-from casecal.study import Grid, truth_for
+from casecal.studies.engine import Grid, truth_for
 
 SIGMA = 0.05e-3
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
-from casecal.parameters import select, unit
+from casecal.model.parameters import select, unit
 
 NAMES = cc.load_robot("puma560").parameter_names
 

@@ -146,7 +146,7 @@ def test_calibrated_robot_file_reproduces_the_calibrated_positions(tmp_path):
 
 
 def test_rotation_vector_up_to_pi():
-    from casecal.measurements import rotation_from_vector, rotation_vector
+    from casecal.data.measurements import rotation_from_vector, rotation_vector
 
     rng = np.random.default_rng(0)
     axes = rng.normal(size=(50, 3))

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from casecal.study import Grid, run_study, run_trial, summarise, trials
+from casecal.studies.engine import Grid, run_study, run_trial, summarise, trials
 
 SMALL = Grid(
     robots=("scorbot",),

@@ -33,7 +33,7 @@ PDF_TABLES = {"table1", "scara_blind_spots", "six_axis_observability"}
 
 def study_runner(executor: str = "processes", workers=None, scheduler=None, progress: bool = True):
     """A function Grid -> DataFrame for the studies, with a progress bar on a terminal."""
-    from ..study import run_study
+    from ..studies.engine import run_study
 
     def run(grid):
         bar = None

@@ -8,13 +8,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from .. import poses
-from ..campaign import calibrate_until
-from ..catalog import load_robot
+from ..data.measurements import simulate
+from ..design import poses
+from ..design.campaign import calibrate_until
 from ..errors import CalibrationError
-from ..identification import identify
-from ..measurements import simulate
-from ..study import Grid, derive_seed, truth_for
+from ..identification.fit import identify
+from ..model.catalog import load_robot
+from ..studies.engine import Grid, derive_seed, truth_for
 from .common import COLORS, StudyResult, pose_axis, save, table
 
 ROBOT = "kr15_2"
@@ -169,8 +169,8 @@ def enough_poses(out: Path, quick: bool = False, run=None) -> StudyResult:
 
 def relative_measurements(out: Path, quick: bool = False, run=None) -> StudyResult:
     """KR 15/2: distances between poses (a ball bar) against absolute positions."""
-    from ..distances import identify_distances, random_pairs, simulate_distances
-    from ..frames import rigid_fit
+    from ..identification.distances import identify_distances, random_pairs, simulate_distances
+    from ..model.frames import rigid_fit
 
     res = StudyResult("relative", "Relative against absolute measurements")
     robot = load_robot(ROBOT).with_parameters({"tool_x": 0.05, "tool_y": 0.03, "tool_z": 0.1})

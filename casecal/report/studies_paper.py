@@ -8,11 +8,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from .. import poses
-from ..catalog import load_robot
-from ..identifiability import RANK_TOLERANCE, observability
-from ..identification import identify
-from ..measurements import simulate
+from ..data.measurements import simulate
+from ..design import poses
+from ..identification.analysis import RANK_TOLERANCE, observability
+from ..identification.fit import identify
+from ..model.catalog import load_robot
 from .common import COLORS, DEG, METHOD_LABEL, StudyResult, save, table
 
 # Table 1 of Simpson & Hayes: synthetic deviation, identified, error % (deg or mm)

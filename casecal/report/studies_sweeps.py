@@ -8,12 +8,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from .. import poses
-from ..catalog import load_robot
-from ..identifiability import observability
-from ..identification import identify
-from ..measurements import simulate
-from ..study import Grid, derive_seed, run_study, summarise
+from ..data.measurements import simulate
+from ..design import poses
+from ..identification.analysis import observability
+from ..identification.fit import identify
+from ..model.catalog import load_robot
+from ..studies.engine import Grid, derive_seed, run_study, summarise
 from .common import COLORS, METHOD_LABEL, SCHEDULE_LABEL, StudyResult, pose_axis, save, table
 from .studies_paper import label
 

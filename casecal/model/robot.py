@@ -10,8 +10,8 @@ from dataclasses import InitVar, dataclass, field
 import casadi as ca
 import numpy as np
 
+from ..errors import CalibrationError
 from . import kinematics
-from .errors import CalibrationError
 from .parameters import FRAME_AXES, select
 
 DEFAULT_REVOLUTE_LIMITS = (-math.pi, math.pi)
@@ -32,7 +32,7 @@ class Joint:
         Link twist and constant joint-angle offset, rad.
     beta : float or None
         Hayati's tilt about the link's y axis, rad; None when the link has none
-        (see `casecal.kinematics`).
+        (see `casecal.model.kinematics`).
     limits : (float, float) or None
         Joint range, rad (R) or m (P); None when no source gives one.
     """
@@ -75,7 +75,7 @@ class Robot:
     joints : tuple of Joint
         Base to tip.
     convention : {"dh", "mdh"}
-        Standard DH or modified DH (Craig); see `casecal.kinematics`.
+        Standard DH or modified DH (Craig); see `casecal.model.kinematics`.
     base, tool : Frame
         World-to-first-frame and flange-to-tool-point transforms.
     full_name, source, confidence : str, tuple of str, str
@@ -85,7 +85,7 @@ class Robot:
         is what is measured. Each adds parameters ``point{k}_x/y/z``.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
-        ``beta`` is None (the rule in `casecal.kinematics`). Default True.
+        ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
     """
 
     name: str
@@ -314,7 +314,7 @@ class Robot:
         q : array-like, shape (dof,) or (N, dof)
             Joint values, rad (R) or m (P).
         parameters : str, list of str or None
-            Which parameters (names, families or ``"all"``; see `casecal.parameters.select`).
+            Which parameters (names, families or ``"all"``; see `casecal.model.parameters.select`).
             Default None: every parameter.
 
         Returns

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from .errors import CalibrationError
-from .parameters import select, unit
-from .robot import Robot, check_joint_values
+from ..errors import CalibrationError
+from ..model.parameters import select, unit
+from ..model.robot import Robot, check_joint_values
 
 RANK_TOLERANCE = 1e-8
 """Relative singular-value threshold of the scaled Jacobian below which a direction is blind.
@@ -136,7 +136,7 @@ def observability(
     q : array-like, shape (N, dof)
         Poses, rad (R) or m (P).
     parameters : str or list of str
-        Names, families or ``"all"`` (see `casecal.parameters.select`). Default None: the
+        Names, families or ``"all"`` (see `casecal.model.parameters.select`). Default None: the
         paper's set θ, a, d.
     measurement : {"position", "pose"}
         What is measured at each pose: the tool point, or the tool point and the tool's

@@ -81,7 +81,7 @@ class Structure:
 
     @property
     def names(self) -> tuple[str, ...]:
-        """Names of the full parameter vector (see `casecal.parameters`)."""
+        """Names of the full parameter vector (see `casecal.model.parameters`)."""
         return parameter_names(len(self.joint_types), self.beta_joints, self.n_points)
 
 

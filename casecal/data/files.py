@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .errors import CalibrationError, CalibrationWarning
-from .frames import matrix_from_quaternion, quaternion_from_matrix
+from ..errors import CalibrationError, CalibrationWarning
+from ..model.frames import matrix_from_quaternion, quaternion_from_matrix
+from ..model.robot import Robot
 from .measurements import Measurements
-from .robot import Robot
 
 _SCALE = {"": 1.0, "m": 1.0, "mm": 1e-3, "um": 1e-6, "rad": 1.0, "deg": math.pi / 180.0}
 _JOINT = re.compile(r"^q(\d+)(?:_(deg|rad|mm|m))?$")

@@ -13,7 +13,7 @@ study is reproducible bit for bit, whatever executor ran it:
 
 Trials are run in groups of one robot, schedule and pose count; the nominal Jacobian and
 its identifiability analysis are computed once per group and noise level (see
-`casecal.identification`). Groups go to local processes (default) or a dask cluster.
+`casecal.identification.fit`). Groups go to local processes (default) or a dask cluster.
 """
 
 from __future__ import annotations
@@ -28,13 +28,13 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
-from . import poses
-from .catalog import load_robot
-from .errors import CalibrationError
-from .identifiability import observability
-from .identification import METHODS, identify
-from .measurements import Measurements
-from .parameters import is_length, select
+from ..data.measurements import Measurements
+from ..design import poses
+from ..errors import CalibrationError
+from ..identification.analysis import observability
+from ..identification.fit import METHODS, identify
+from ..model.catalog import load_robot
+from ..model.parameters import is_length, select
 
 log = logging.getLogger(__name__)
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from . import kinematics
-from .errors import CalibrationError
-from .measurements import rotation_vector
-from .robot import Robot
+from ..data.measurements import rotation_vector
+from ..errors import CalibrationError
+from ..model import kinematics
+from ..model.robot import Robot
 
 
 def nr_threshold(s: np.ndarray, shape: tuple[int, int]) -> float:

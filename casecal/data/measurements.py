@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CalibrationError
-from .robot import Robot, check_joint_values
+from ..errors import CalibrationError
+from ..model.robot import Robot, check_joint_values
 
 
 def broadcast_sigma(sigma, n: int) -> np.ndarray:
@@ -150,7 +150,7 @@ def rotation_vector(R: np.ndarray) -> np.ndarray:
     Through the unit quaternion (w ≥ 0): angle = 2 atan2(|v|, w), exact up to π, where the
     trace formula loses the axis.
     """
-    from .frames import quaternion_from_matrix
+    from ..model.frames import quaternion_from_matrix
 
     R = np.asarray(R, dtype=float)
     quat = quaternion_from_matrix(R.reshape(-1, 3, 3))
@@ -197,7 +197,7 @@ def simulate(true_robot: Robot, q, noise=0.0, seed=None, orientation_noise=None)
     -------
     Measurements
     """
-    from .poses import rng_from
+    from ..design.poses import rng_from
 
     q2, _ = check_joint_values(q, true_robot.dof)
     sigma = broadcast_sigma(noise, q2.shape[0])

@@ -6,11 +6,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CalibrationError
-from .identification import identify
-from .measurements import Measurements
-from .poses import rng_from
-from .robot import Robot
+from ..data.measurements import Measurements
+from ..design.poses import rng_from
+from ..errors import CalibrationError
+from ..model.robot import Robot
+from .fit import identify
 
 FRAME_PARAMETERS = ("base_*", "tool_x", "tool_y", "tool_z", "point*")
 

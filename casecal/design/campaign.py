@@ -21,12 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..data.measurements import Measurements
+from ..errors import CalibrationError
+from ..identification.calibration import Calibration
+from ..identification.fit import identify
+from ..model.robot import Robot
 from . import poses
-from .calibration import Calibration
-from .errors import CalibrationError
-from .identification import identify
-from .measurements import Measurements
-from .robot import Robot
 
 ORDERS = ("optimal", "seed", "uniform")
 
@@ -132,8 +132,8 @@ def calibrate_until(
     -------
     Campaign
     """
-    from .identifiability import selection
-    from .identification import METHODS
+    from ..identification.analysis import selection
+    from ..identification.fit import METHODS
 
     if order not in ORDERS:
         raise CalibrationError(f"order must be one of {', '.join(ORDERS)}, got {order!r}")

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ..data.files import _numbers, read_joints, read_table
+from ..design.poses import rng_from
+from ..errors import CalibrationError
+from ..model.robot import Robot, check_joint_values
+from .analysis import analyse, selection
 from .calibration import STATUS_MESSAGES, Calibration
-from .errors import CalibrationError
-from .identifiability import analyse, selection
-from .identification import METHODS, uncertainty
-from .measurement_files import _numbers, read_joints, read_table
-from .poses import rng_from
-from .robot import Robot, check_joint_values
+from .fit import METHODS, uncertainty
 from .solvers import SOLVERS
 
 
@@ -131,7 +131,7 @@ def read_distance_csv(poses_path, pairs_path, robot: Robot) -> DistanceMeasureme
 
 def write_distance_csv(pairs_path, measurements: DistanceMeasurements) -> None:
     """Write the pairs file (i, j, distance_mm, sigma_mm)."""
-    from .measurement_files import write_atomic
+    from ..data.files import write_atomic
 
     df = pd.DataFrame(
         {

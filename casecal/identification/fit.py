@@ -23,12 +23,12 @@ from functools import partial
 
 import numpy as np
 
+from ..data.measurements import Measurements, broadcast_sigma
+from ..errors import CalibrationError
+from ..model.frames import rigid_fit, rpy_from_matrix
+from ..model.robot import Robot
+from .analysis import analyse, selection
 from .calibration import STATUS_MESSAGES, Calibration
-from .errors import CalibrationError
-from .frames import rigid_fit, rpy_from_matrix
-from .identifiability import analyse, selection
-from .measurements import Measurements, broadcast_sigma
-from .robot import Robot
 from .solvers import SOLVERS, Problem, nr_threshold, triangular
 
 log = logging.getLogger(__name__)
@@ -323,7 +323,7 @@ def _starting_robot(robot: Robot, make, names) -> tuple[Robot, str]:
 
     When base parameters are to be identified, the measured points may be in a far-away,
     turned instrument frame. A rigid fit of the nominal positions to the measured ones
-    (`casecal.frames.rigid_fit`) gives a base frame close enough for Gauss-Newton, whatever
+    (`casecal.model.frames.rigid_fit`) gives a base frame close enough for Gauss-Newton, whatever
     the offset and angle; it is kept only if it lowers the residual.
     """
     base = [n for n in names if n.startswith("base_")]

@@ -3,7 +3,7 @@
 The full parameter vector of a robot is, in this order:
 
 - per joint ``i`` (1-based, base to tip): ``theta{i}``, ``d{i}``, ``a{i}``, ``alpha{i}``, and
-  ``beta{i}`` for the links that carry Hayati's extra rotation (see `casecal.kinematics`);
+  ``beta{i}`` for the links that carry Hayati's extra rotation (see `casecal.model.kinematics`);
 - the base frame: ``base_x``, ``base_y``, ``base_z`` (m), ``base_rx``, ``base_ry``,
   ``base_rz`` (rad);
 - the tool frame: ``tool_x`` … ``tool_rz``, likewise.
@@ -17,7 +17,7 @@ import fnmatch
 import re
 from collections.abc import Iterable, Sequence
 
-from .errors import CalibrationError
+from ..errors import CalibrationError
 
 JOINT_FAMILIES = ("theta", "d", "a", "alpha", "beta")
 FRAME_AXES = ("x", "y", "z", "rx", "ry", "rz")

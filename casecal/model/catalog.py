@@ -33,7 +33,7 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
-from .errors import CalibrationError
+from ..errors import CalibrationError
 from .robot import Frame, Joint, Robot
 
 _LENGTH = {"m": 1.0, "mm": 1e-3}
@@ -59,7 +59,7 @@ _FRAME_KEYS = {"xyz", "rpy"}
 
 
 def _catalog_dir():
-    return resources.files("casecal") / "robots"
+    return resources.files("casecal.model") / "robots"
 
 
 def robots() -> list[str]:

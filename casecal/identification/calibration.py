@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 
-from .identifiability import Observability
-from .parameters import is_length, unit
-from .robot import Robot
+from ..model.parameters import is_length, unit
+from ..model.robot import Robot
+from .analysis import Observability
 
 # casecal statuses, one table for every method (scipy style: success = status > 0)
 STATUS_MESSAGES = {
@@ -183,7 +183,7 @@ class Calibration:
         """The same result with the true deviations (SI) known: `table` gains error columns."""
         unknown = [n for n in truth if n not in self.nominal.parameters]
         if unknown:
-            from .errors import CalibrationError
+            from ..errors import CalibrationError
 
             raise CalibrationError(f"truth names unknown parameter {unknown[0]!r}")
         return dataclasses.replace(self, truth={k: float(v) for k, v in truth.items()})

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import CalibrationError
-from .robot import Robot
+from ..errors import CalibrationError
+from ..model.robot import Robot
 
 MAX_POSES = 10_000_000
 """More poses than anyone measures; beyond it a request is a typo, not a plan."""
@@ -129,7 +129,7 @@ def optimal(
     q : ndarray, shape (n, dof)
         The chosen poses, in the order chosen.
     """
-    from .identifiability import analyse, selection  # poses sit below identification
+    from ..identification.analysis import analyse, selection  # poses sit below identification
 
     n = _check_count(n)
     if criterion not in ("O1", "O3"):

@@ -1,0 +1,1 @@
+"""Measurements: the `Measurements` type, their simulation, and measurement files (CSV)."""

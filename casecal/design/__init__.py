@@ -1,0 +1,1 @@
+"""Experiment design: pose schedules, optimal poses, and calibrate-until-good-enough."""
