@@ -21,7 +21,7 @@ from .data.measurements import simulate
 from .design import poses
 from .errors import CalibrationError
 from .identification.analysis import observability
-from .identification.fit import METHODS, identify
+from .identification.fit import DEFAULT_METHOD, METHODS, identify
 from .identification.validation import split, validate
 from .model.catalog import load_deviations, load_robot, robot_to_toml, robots
 from .model.parameters import unit
@@ -466,9 +466,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--method",
         choices=METHODS,
-        default="svd",
-        help="svd: the paper's one-shot step; gauss-newton, lm: iterated; "
-        "ipopt: CasADi NLP (default svd)",
+        default=DEFAULT_METHOD,
+        help="gauss-newton, lm: iterated least squares; ipopt: CasADi NLP; svd: the "
+        f"paper's one-shot linearised step (default {DEFAULT_METHOD})",
     )
     p.add_argument("--parameters", default=None, help=params_help)
     p.add_argument(

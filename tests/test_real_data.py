@@ -183,7 +183,11 @@ def test_summary_says_when_the_model_does_not_fit_the_noise():
     meas = cc.simulate(true, cc.poses.uniform(robot, 40, seed=0), noise=SIGMA, seed=1)
     cal = cc.identify(robot, meas, ["theta*", "a*"], "gauss-newton")
     assert cal.reduced_chi2 > 4
-    assert "reduced χ²" in str(cal.summary())
+    # a fit that cannot reach its noise is a failure, and says why
+    assert not cal.success and cal.status == -2
+    assert "residual consistent with the noise" in [c.name for c in cal.audit.failures]
+    assert "FAIL residual consistent with the noise: reduced χ²" in str(cal.summary())
     # with the base frame asked for, the same data fit down to the noise
     fine = cc.identify(robot, meas, ["theta*", "d*", "a*", "alpha*", "base_*"], "gauss-newton")
-    assert fine.reduced_chi2 < 2 and "reduced χ²" not in str(fine.summary())
+    assert fine.reduced_chi2 < 2 and fine.success and fine.audit.passed
+    assert "ok   residual consistent with the noise: reduced χ²" in str(fine.summary())

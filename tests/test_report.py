@@ -38,8 +38,18 @@ def test_quick_report(tmp_path):
     assert t1["iterated 100 error %"].abs().max() < 1e-6
     np.testing.assert_allclose(t1["synthetic"], [v[0] for v in PAPER_TABLE1.values()])
 
-    # pose count: with uniform poses the iterated error falls as poses grow
+    # pose count: every trial is in the table; a fit that passed its audit rarely ends
+    # worse than the uncalibrated robot (the audit predicts, it cannot know), and the
+    # figure rings and counts those that do; with uniform poses the iterated error falls
     pc = pd.read_csv(tmp_path / "pose_count_trials.csv")
+    assert len(pc) == 2 * 4 * 2 * 2 * 4  # robots × counts × schedules × methods × trials
+    worse = pc.success & (pc.rms_holdout_mm > pc.rms_holdout_before_mm)
+    assert worse.sum() <= 0.05 * pc.success.sum()
+    caption = next(
+        f.caption for s in results for f in s.figures if f.path.stem == "pose_count_error"
+    )
+    assert "uncalibrated" in caption and "failed their audit" in caption
+    assert f"worse than uncalibrated: {int(worse.sum())}." in caption
     uni = pc[(pc.schedule == "uniform") & (pc.method == "gauss-newton")]
     for _, g in uni.groupby("robot"):
         med = g.groupby("n_poses")["rms_holdout_mm"].median()

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CalibrationError
+from ..model.frames import rotation_from_vector, rotation_vector  # noqa: F401 (re-export)
 from ..model.robot import Robot, check_joint_values
 
 
@@ -142,36 +143,6 @@ class Measurements:
             orient,
             self.orientation_sigma,
         )
-
-
-def rotation_vector(R: np.ndarray) -> np.ndarray:
-    """``vee(log(R))`` for rotations R (..., 3, 3): axis times angle, rad, shape (..., 3).
-
-    Through the unit quaternion (w ≥ 0): angle = 2 atan2(|v|, w), exact up to π, where the
-    trace formula loses the axis.
-    """
-    from ..model.frames import quaternion_from_matrix
-
-    R = np.asarray(R, dtype=float)
-    quat = quaternion_from_matrix(R.reshape(-1, 3, 3))
-    w, v = quat[:, 0], quat[:, 1:]
-    s = np.linalg.norm(v, axis=1)
-    angle = 2.0 * np.arctan2(s, w)
-    factor = np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0 / np.maximum(w, 1e-300))
-    return (v * factor[:, None]).reshape(R.shape[:-1])
-
-
-def rotation_from_vector(w: np.ndarray) -> np.ndarray:
-    """``exp([w]×)`` (Rodrigues) for rotation vectors w (..., 3), rad."""
-    w = np.asarray(w, dtype=float)
-    angle = np.linalg.norm(w, axis=-1)[..., None, None]
-    K = np.zeros((*w.shape[:-1], 3, 3))
-    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
-    K = K - np.swapaxes(K, -1, -2)
-    safe = np.where(angle > 1e-12, angle, 1.0)
-    A = np.where(angle > 1e-12, np.sin(angle) / safe, 1.0)
-    B = np.where(angle > 1e-12, (1 - np.cos(angle)) / safe**2, 0.5)
-    return np.eye(3) + A * K + B * (K @ K)
 
 
 def simulate(true_robot: Robot, q, noise=0.0, seed=None, orientation_noise=None) -> Measurements:

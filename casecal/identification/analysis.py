@@ -80,8 +80,9 @@ class Observability:
         A parameter is unidentifiable when it has a component in the null space.
     blind_spots : tuple of BlindSpot
     base_parameters : tuple of str
-        A largest identifiable subset (QR in canonical pivot order: the first parameter of
-        each blind group); the others can be held at nominal without losing any fit.
+        A largest identifiable subset, chosen in `pivot_order` (frames first, then the
+        first parameter of each blind group); the others can be held without losing any
+        fit.
     indices : dict
         Observability indices of the base set's scaled Jacobian, with N poses and
         singular values s1 ≥ … ≥ sr: ``O1`` = (s1⋯sr)^(1/r) / √N (Borm & Menq), ``O2`` =
@@ -162,8 +163,13 @@ def observability(
     return analyse(J.reshape(-1, len(names)), names, n_poses=q2.shape[0])
 
 
-def analyse(J: np.ndarray, names, n_poses: int, tolerance: float = RANK_TOLERANCE):
-    """`observability` for a stacked Jacobian (rows: measurements, columns: `names`)."""
+def analyse(J: np.ndarray, names, n_poses: int, tolerance: float = RANK_TOLERANCE, prefer=()):
+    """`observability` for a stacked Jacobian (rows: measurements, columns: `names`).
+
+    `prefer` names parameters offered to the base set before all others, in its order: a
+    fit that looks again where it ended keeps what it estimates and only adds what has
+    become visible.
+    """
     names = tuple(names)
     k = len(names)
     if J.shape[0] > k:
@@ -185,7 +191,7 @@ def analyse(J: np.ndarray, names, n_poses: int, tolerance: float = RANK_TOLERANC
     spots += _group_spots(blind_rows, live, J[:, ~zero])
     unident = {m for spot in spots for m in spot.members}
 
-    base = _base_parameters(Js, names, zero, rank, tolerance * s_max)
+    base = _base_parameters(Js, names, zero, rank, tolerance * s_max, prefer)
     return Observability(
         parameters=names,
         singular_values=s,
@@ -331,22 +337,47 @@ def _expression(coeffs: np.ndarray, members, direction: bool = False) -> str:
     return text
 
 
-def _base_parameters(Js: np.ndarray, names, zero, rank: int, threshold: float) -> tuple[str, ...]:
+FRAME_PREFIXES = ("base_", "point", "tool_")
+"""Parameter families offered first to the base set, in this order (see `pivot_order`)."""
+
+
+def pivot_order(names) -> list[int]:
+    """The order in which parameters are offered to the base set: frames, then joints.
+
+    The base frame, the measured points and the tool frame come first, then the joint
+    parameters in canonical order. A frame parameter moves every measured point by the
+    same rigid motion, so where a joint parameter duplicates it (θ1 and d1 with the base;
+    the last link's θn, dn, an, αn with the tool point) the frame absorbs it exactly,
+    not only to first order, and the joint parameter is held at its nominal value. The
+    other way round, the last joint's θn would stand for a tool offset through the tiny
+    lever of the tool's distance from its axis, which is nearly singular when the tool
+    point sits on that axis.
+    """
+    first = [i for prefix in FRAME_PREFIXES for i, n in enumerate(names) if n.startswith(prefix)]
+    return first + [i for i in range(len(names)) if i not in set(first)]
+
+
+def _base_parameters(
+    Js: np.ndarray, names, zero, rank: int, threshold: float, prefer=()
+) -> tuple[str, ...]:
     """A largest independent subset of columns: QR with the pivot order fixed.
 
-    Columns are taken in canonical order (theta1, d1, a1, alpha1, …, base, tool) and kept
-    when their component orthogonal to the columns kept so far exceeds `threshold`, the
-    rank's own cut-off (Gram-Schmidt, applied twice for stability). So the first parameter
-    of each blind group is estimated and the later ones are held: a predictable choice,
-    where LAPACK's largest-norm pivoting would pick among equal-norm scaled columns by
-    rounding noise.
-    Falls back to pivoted QR (geqp3) if the greedy pass disagrees with the SVD rank.
+    Columns are offered in `pivot_order` (frames, then theta1, d1, a1, alpha1, …; the
+    `prefer` ones first, in their order) and kept when their component orthogonal to the
+    columns kept so far exceeds `threshold`,
+    the rank's own cut-off (Gram-Schmidt, applied twice for stability). So the first
+    parameter of each blind group is estimated and the later ones are held: a predictable
+    choice, where LAPACK's largest-norm pivoting would pick among equal-norm scaled
+    columns by rounding noise. Falls back to pivoted QR (geqp3) if the greedy pass
+    disagrees with the SVD rank.
     """
     if rank == 0:
         return ()
     basis = np.zeros((Js.shape[0], 0))
     chosen = []
-    for i, name in enumerate(names):
+    order = [names.index(n) for n in prefer]
+    order += [i for i in pivot_order(names) if names[i] not in prefer]
+    for i in order:
         if zero[i]:
             continue
         v = Js[:, i].copy()
@@ -355,11 +386,93 @@ def _base_parameters(Js: np.ndarray, names, zero, rank: int, threshold: float) -
         norm = np.linalg.norm(v)
         if norm > threshold:
             basis = np.column_stack([basis, v / norm])
-            chosen.append(name)
+            chosen.append(names[i])
     if len(chosen) != rank:
         _, _, perm = scipy.linalg.qr(Js, mode="economic", pivoting=True)
         chosen = [names[i] for i in perm[:rank] if not zero[i]]
     return tuple(n for n in names if n in chosen)
+
+
+@dataclass(frozen=True)
+class Representation:
+    """What the estimated parameters stand for once the others are held.
+
+    Attributes
+    ----------
+    terms : dict of str to tuple of (str, float)
+        Per estimated parameter e, the held parameters h whose effect it carries, with
+        coefficient c (units of e per unit of h): e's estimate is that of
+        ``e + Σ c·h``, the held h being at their hold values.
+    misfit : dict of str to float
+        Per held parameter, the part of its column that the estimated ones cannot
+        reproduce, relative to its norm: 0 for a parameter that is exactly a combination
+        of the estimated ones (blind), 1 for one unrelated to them (0 also for a zero
+        column, which nothing needs to reproduce).
+    """
+
+    terms: dict
+    misfit: dict
+
+    def expression(self, name: str) -> str:
+        """``name + c·h …`` in words, e.g. ``"d2 + d3 + d4"``; `name` alone when it
+        carries nothing else."""
+        pairs = self.terms.get(name, ())
+        return _expression(np.array([1.0, *(c for _, c in pairs)]), [name, *(h for h, _ in pairs)])
+
+    def combination(self, name: str, values: dict) -> float:
+        """The value of `name`'s combination for parameter `values` (missing: 0)."""
+        return values.get(name, 0.0) + sum(
+            c * values.get(h, 0.0) for h, c in self.terms.get(name, ())
+        )
+
+
+PLAUSIBLE = {"m": 0.01, "rad": 0.01}
+"""A generous deviation (10 mm, 0.57°) by which to judge whether a term matters."""
+
+REPRESENTED = 0.05
+"""A held parameter whose column the estimated ones reproduce to within this fraction is
+named in their combinations; beyond it the held parameter is its own, unestimated effect."""
+
+
+def represent(J: np.ndarray, names, estimated) -> Representation:
+    """Express each held parameter's column by the estimated ones (least squares).
+
+    Parameters
+    ----------
+    J : ndarray, shape (rows, k)
+        Jacobian (weighted or not) of all `names`, or its R factor.
+    names : sequence of str
+    estimated : sequence of str
+        A subset of `names`.
+    """
+    names = list(names)
+    if J.shape[0] > J.shape[1]:
+        J = np.linalg.qr(J, mode="r")
+    est = [names.index(n) for n in estimated]
+    held = [i for i in range(len(names)) if i not in set(est)]
+    norms = np.linalg.norm(J, axis=0)
+    terms: dict[str, list] = {names[i]: [] for i in est}
+    misfit: dict[str, float] = {}
+    if not held:
+        return Representation({k: () for k in terms}, misfit)
+    B = J[:, est]
+    b_norms = np.where(norms[est] > 0, norms[est], 1.0)
+    for h in held:
+        if norms[h] == 0 or not est:
+            misfit[names[h]] = 0.0 if norms[h] == 0 else 1.0
+            continue
+        coef = np.linalg.lstsq(B / b_norms, J[:, h], rcond=None)[0] / b_norms
+        rest = J[:, h] - B @ coef
+        misfit[names[h]] = float(np.linalg.norm(rest) / norms[h])
+        if misfit[names[h]] > REPRESENTED:
+            continue
+        for k, c in zip(est, coef, strict=True):
+            # a term carrying under a millionth of the held column is rounding, and one
+            # through which a plausible deviation of the held parameter moves the estimate
+            # by less than a micrometre (microradian) is no meaning a user could act on
+            if abs(c) * norms[k] > 1e-6 * norms[h] and abs(c) * PLAUSIBLE[unit(names[h])] > 1e-6:
+                terms[names[k]].append((names[h], float(c)))
+    return Representation({k: tuple(v) for k, v in terms.items()}, misfit)
 
 
 def selection(robot: Robot, parameters) -> list[str]:

@@ -12,10 +12,12 @@ import scipy.stats
 
 from ..model.parameters import is_length, unit
 from ..model.robot import Robot
-from .analysis import Observability
+from .analysis import Observability, Representation
+from .audit import Audit
 
 # casecal statuses, one table for every method (scipy style: success = status > 0)
 STATUS_MESSAGES = {
+    -2: "failed: the answer audit did not pass",
     -1: "failed: the solver reported an error",
     0: "stopped: maximum number of iterations reached",
     1: "done: one-shot linearised solution (the paper's SVD step)",
@@ -23,6 +25,7 @@ STATUS_MESSAGES = {
     3: "stopped: the cost no longer decreases",
     4: "converged: residuals are at the rounding floor of the data",
     5: "converged: the solver's optimality tolerance was met",
+    6: "converged: the solver stopped early, at a point no step can measurably improve",
 }
 
 
@@ -59,8 +62,9 @@ class Calibration:
     parameters : tuple of str
         The parameters asked for.
     estimated : tuple of str
-        Those actually estimated: a base set of the identifiable ones. The others are held
-        at nominal (deviation 0, standard error NaN) and listed in `unidentifiable`.
+        Those actually estimated: a base set of what the data determine. The others are
+        held at nominal (deviation 0, standard error NaN): blind at these poses, or not
+        determined by these data (`pruned`); see `held_reason`.
     deviations : dict of str to float
         Identified deviation of every asked-for parameter, SI.
     standard_errors : dict of str to float
@@ -79,17 +83,43 @@ class Calibration:
         The loss that was minimised.
     iterations : int
     status : int
-        See `STATUS_MESSAGES`; ``success = status > 0``.
+        See `STATUS_MESSAGES`; ``success = status > 0``. -2 when the answer audit
+        failed, whatever the solver said (`solver_status`).
     message : str
     history : tuple of float
         Cost ``0.5 Σ (r/σ)²`` (or ``0.5 Σ r²`` in m² without σ) at the start and after
         each iteration.
     observability : Observability
-        Of the asked-for parameters at the nominal robot and these poses.
+        Of the asked-for parameters at these poses, where the fit ended.
     sigma_known : bool
         Whether the covariance uses a stated σ (True) or the residuals' own scale.
     truth : dict or None
         True deviations (SI), when known (simulation); adds columns to `table`.
+    audit : Audit or None
+        The checks that decided `status` (`casecal.identification.audit`).
+    solver_status : int or None
+        What the solver itself reported, before the audit.
+    representation : Representation or None
+        What each estimate stands for when it also carries held parameters' effects
+        (e.g. ``d2`` for ``d2 + d3 + d4``).
+    pruned : dict of str to str
+        Parameters held because these data do not determine them, with the reason.
+    frozen : dict of str to str
+        Parameters that were estimated in an earlier round but are blind where the fit
+        ended: held at the value they were fitted to while visible (their deviation need
+        not be zero), with the reason.
+    start_observability : Observability or None
+        Of the asked-for parameters where the fit started.
+    rounds : int
+        Rounds of fit-and-look-again (`casecal.identification.rounds`).
+    joined : tuple of str
+        Parameters blind where the fit started that the later rounds estimated.
+    pose_blind : tuple of str
+        Held parameters that are blind at these poses only: poses across the joint
+        ranges would tell them apart. The calibrated robot is then right on poses like
+        the measured ones, and elsewhere shows these parameters' own (unknown) deviations.
+    still_joints : tuple of str
+        Joints that barely move in the data (under 1° or 1 mm), with their value.
     """
 
     method: str
@@ -114,6 +144,16 @@ class Calibration:
     orientation_residuals: np.ndarray | None = None
     outliers: tuple[int, ...] = ()
     loss: str = "linear"
+    audit: Audit | None = None
+    solver_status: int | None = None
+    representation: Representation | None = None
+    pruned: dict = field(default_factory=dict)
+    frozen: dict = field(default_factory=dict)
+    start_observability: Observability | None = None
+    rounds: int = 1
+    joined: tuple[str, ...] = ()
+    pose_blind: tuple[str, ...] = ()
+    still_joints: tuple[str, ...] = ()
 
     @property
     def success(self) -> bool:
@@ -122,14 +162,48 @@ class Calibration:
 
     @property
     def unidentifiable(self) -> tuple[str, ...]:
-        """Asked-for parameters the data cannot see individually (held at nominal or
-        standing for a combination)."""
-        return self.observability.unidentifiable
+        """Asked-for parameters the data cannot determine individually: those held (blind
+        at these poses, or not determined for the noise) and the estimates that stand for
+        a combination with held ones."""
+        combined = {n for n in self.estimated if self._terms().get(n)}
+        return tuple(n for n in self.parameters if n not in self.estimated or n in combined)
 
     @property
     def held(self) -> tuple[str, ...]:
-        """Asked-for parameters held at nominal because the data cannot separate them."""
+        """Asked-for parameters held at nominal (not estimated); `held_reason` says why."""
         return tuple(n for n in self.parameters if n not in self.estimated)
+
+    def held_reason(self, name: str) -> str:
+        """Why a held parameter was not estimated, in words ("" for an estimated one)."""
+        if name in self.estimated:
+            return ""
+        if name in self.pruned:
+            return "not determined by these data: " + self.pruned[name]
+        if name in self.frozen:
+            return self.frozen[name]
+        carriers = [e for e, terms in self._terms().items() if any(h == name for h, _ in terms)]
+        if carriers:
+            shown = "; ".join(self.stands_for(e) for e in carriers)
+            return f"blind: its effect is carried by {shown}"
+        return "it moves nothing measured at these poses"
+
+    def _terms(self) -> dict:
+        return {} if self.representation is None else self.representation.terms
+
+    def stands_for(self, name: str) -> str:
+        """What the estimate of `name` means: ``name`` itself, or a combination such as
+        ``"d2 + d3 + d4"`` when held parameters' effects are carried by it."""
+        if self.representation is None:
+            return name
+        return self.representation.expression(name)
+
+    def true_value(self, name: str) -> float | None:
+        """The true value (SI) of what `name`'s estimate stands for; None without truth."""
+        if self.truth is None:
+            return None
+        if name in self.estimated and self.representation is not None:
+            return self.representation.combination(name, self.truth)
+        return self.truth.get(name, 0.0)
 
     @property
     def n_poses(self) -> int:
@@ -189,17 +263,20 @@ class Calibration:
         return dataclasses.replace(self, truth={k: float(v) for k, v in truth.items()})
 
     def errors(self) -> dict:
-        """Relative error of each identified deviation, ``(identified - true) / |true|``.
+        """Relative error of each estimate, ``(identified - true) / |true|``.
 
-        Only for parameters with a non-zero true deviation that were estimated.
+        Only for estimated parameters whose true value is not zero. An estimate that stands
+        for a combination (``d2`` for ``d2 + d3 + d4``) is compared with the true value of
+        that combination: what the data could identify, not a split they cannot see.
         """
         if not self.truth:
             return {}
-        return {
-            n: (self.deviations[n] - t) / abs(t)
-            for n, t in self.truth.items()
-            if t != 0 and n in self.estimated
-        }
+        out = {}
+        for n in self.estimated:
+            true = self.true_value(n)
+            if true:
+                out[n] = (self.deviations[n] - true) / abs(true)
+        return out
 
     @property
     def table(self) -> pd.DataFrame:
@@ -207,29 +284,27 @@ class Calibration:
 
         Columns: parameter, unit, nominal, deviation, std_error, ci95_low, ci95_high,
         status; with `truth`: synthetic, error_pct (``100 (identified - true) / |true|``).
+        A row whose estimate stands for a combination gives that combination's value,
+        interval and truth; a held row has no interval and no error.
         """
         if self.sigma_known:
             z = scipy.stats.norm.ppf(0.975)
         else:
             z = scipy.stats.t.ppf(0.975, max(self.dof_residual, 1))
-        combos = {m: spot for spot in self.observability.blind_spots for m in spot.members}
         rows = []
         nominal = self.nominal.parameters
         for name in self.parameters:
             u, f = display_unit(name)
             dev, se = self.deviations[name], self.standard_errors[name]
             if name not in self.estimated:
-                status = "held: unidentifiable" + ("" if dev == 0 else " (at its start value)")
-            elif name in combos:
-                spot = combos[name]
-                meaning = spot.visible_as(name)
-                status = f"stands for {meaning}" if meaning else "blind combination"
-                if se > POORLY_DETERMINED[unit(name)]:
-                    status += ", poorly determined"
-            elif se > POORLY_DETERMINED[unit(name)]:
-                status = "poorly determined"
+                status = "held: " + self.held_reason(name)
             else:
-                status = "identified"
+                meaning = self.stands_for(name)
+                status = "identified" if meaning == name else f"stands for {meaning}"
+                if se > POORLY_DETERMINED[unit(name)]:
+                    status = (
+                        "poorly determined" if meaning == name else status + ", poorly determined"
+                    )
             row = {
                 "parameter": name,
                 "unit": u,
@@ -241,9 +316,11 @@ class Calibration:
                 "status": status,
             }
             if self.truth is not None:
-                true = self.truth.get(name, 0.0)
+                true = self.true_value(name)
                 row["synthetic"] = true * f
-                row["error_pct"] = 100 * (dev - true) / abs(true) if true else math.nan
+                row["error_pct"] = (
+                    100 * (dev - true) / abs(true) if true and name in self.estimated else math.nan
+                )
             rows.append(row)
         return pd.DataFrame(rows)
 

@@ -21,8 +21,9 @@ from ..errors import CalibrationError
 from ..model.robot import Robot, check_joint_values
 from .analysis import analyse, selection
 from .calibration import STATUS_MESSAGES, Calibration
-from .fit import METHODS, uncertainty
+from .fit import METHODS
 from .solvers import SOLVERS
+from .uncertainty import uncertainty
 
 
 @dataclass(frozen=True)

@@ -8,39 +8,50 @@ estimated parameters::
 whose rows per pose are the measured points' coordinates, ``y - f(q, p)`` (m), and, when
 orientations were measured, the rotation vector ``log(R_meas R(q, p)ᵀ)`` (rad). Columns
 of the Jacobian are scaled to unit norm before any factorisation, so metres and radians
-do not decide the rank. Parameters the poses cannot separate are found first
-(`casecal.observability`); a base set of the identifiable ones is estimated and the rest
-are held at nominal (or at the start of the fit) and reported, never given arbitrary
-values.
+do not decide the rank. The pieces, in order:
+
+- `casecal.identification.start`: the frame the fit works in (a rigid fit brings a far,
+  turned instrument's points near the robot) and where it starts;
+- `casecal.identification.rounds`: the fit in rounds, estimating a base set of what the
+  data can see where the fit ends, holding the rest at nominal, and holding what the noise
+  does not determine;
+- `casecal.identification.audit`: the checks that decide ``success``;
+- `casecal.identification.calibration`: the result, in the instrument's frame.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections import OrderedDict
 from functools import partial
 
 import numpy as np
 
 from ..data.measurements import Measurements, broadcast_sigma
 from ..errors import CalibrationError
-from ..model.frames import rigid_fit, rpy_from_matrix
 from ..model.robot import Robot
-from .analysis import analyse, selection
+from .analysis import analyse, represent, selection
+from .audit import Facts, audit, predicted_rms
 from .calibration import STATUS_MESSAGES, Calibration
-from .solvers import SOLVERS, Problem, nr_threshold, triangular
+from .linalg import gauss_newton_step
+from .problem import Problem
+from .rounds import LOSSES, Settings, fit_in_rounds, workspace_jacobian, workspace_poses
+from .solvers import ROUNDING, SOLVERS, floor_cost
+from .start import choose_frame, partial_base_start
+from .uncertainty import uncertainty
 
 log = logging.getLogger(__name__)
 
 METHODS = tuple(SOLVERS)
+DEFAULT_METHOD = "gauss-newton"
+"""Iterated: it reaches the least-squares solution wherever the one-shot step does not."""
 
 
 def identify(
     robot: Robot,
     measurements: Measurements,
     parameters=None,
-    method: str = "svd",
+    method: str = DEFAULT_METHOD,
     *,
     noise=None,
     bounds: dict | None = None,
@@ -108,19 +119,8 @@ def identify(
         coordinates than parameters to estimate, bounds or prior for a method without them.
     """
     t_start = time.perf_counter()
-    if method not in METHODS:
-        raise CalibrationError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
-    if (bounds or prior) and method != "ipopt":
-        raise CalibrationError("bounds and prior need method='ipopt'")
+    _check_options(method, bounds, prior, max_iterations, tolerance, loss, loss_scale)
     bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
-    if (
-        isinstance(max_iterations, bool)
-        or not isinstance(max_iterations, int)
-        or max_iterations < 1
-    ):
-        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if not (isinstance(tolerance, int | float) and 0 < tolerance < 1):
-        raise CalibrationError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
     names = selection(robot, parameters)
     if measurements.q.shape[1] != robot.dof:
         raise CalibrationError(
@@ -130,6 +130,11 @@ def identify(
     q, y = measurements.q, measurements.points  # y: (N, m, 3)
     robot, point_note = _with_points(robot, measurements.n_points)
     names = selection(robot, parameters) if point_note else names
+    unknown = [n for n in {**bounds, **prior} if n not in names]
+    if unknown:
+        raise CalibrationError(
+            f"bounds/prior name {unknown[0]!r} is not among the asked-for parameters"
+        )
     sigma = measurements.sigma if noise is None else broadcast_sigma(noise, q.shape[0])
     known = bool(np.all(sigma > 0))
     if not known and np.any(sigma > 0):
@@ -137,8 +142,185 @@ def identify(
             "noise sigma is zero for some coordinates and not others; give every coordinate "
             "its sigma (> 0), or none (0 everywhere) to weigh all alike"
         )
+    if prior and not known:
+        raise CalibrationError(
+            "a prior needs the measurement sigma to weigh against; give noise=... (m) or "
+            "measurements with sigma"
+        )
     w = 1.0 / sigma if known else np.ones_like(sigma)
-    R_meas = measurements.orientations
+    w_rot = _orientation_weight(measurements, orientation_sigma, known, w)
+
+    frame, frame_note = choose_frame(robot, q, y, sigma, names, np.mean(w**2, axis=1))
+    make = partial(
+        Problem,
+        q=q,
+        y=frame.points_in(y),
+        w=w,
+        orientations=frame.rotations_in(measurements.orientations),
+        w_rot=w_rot,
+    )
+    start, start_note = robot, frame_note
+    if frame.is_identity:
+        start, start_note = partial_base_start(robot, lambda r, n: make(r, names=n), names)
+    e0 = _rms(make(start, names=names).point_residuals(np.zeros(len(names))))
+    settings = Settings(
+        method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior
+    )
+    out = fit_in_rounds(make, start, names, settings, e0)
+
+    final = make(out.robot, names=names)
+    at_start = make(start, names=names)
+    if loss != "linear":
+        final, at_start = final.reweighted(out.weights), at_start.reweighted(out.weights)
+    est = final.restricted(out.estimated)
+    x0 = np.zeros(len(out.estimated))
+    J, r = est.jacobian(x0), est.residual(x0)
+    prior_w = np.array([1.0 / prior[n] if n in prior else 0.0 for n in out.estimated])
+    cov, _ = uncertainty(J, r, known, names, out.estimated, prior_w)
+    r_start = at_start.residual(np.zeros(len(names)))
+    point_residuals = est.point_residuals(x0)
+    facts = Facts(
+        solver_status=out.solver_status,
+        solver_message=out.message,
+        cost_start=0.5 * float(r_start @ r_start),
+        cost_final=0.5 * float(r @ r),
+        floor=floor_cost(est, ROUNDING),
+        predicted_decrease=gauss_newton_step(J, r)[1] if len(x0) else 0.0,
+        known=known,
+        dof=r.size - len(out.estimated),
+        rms_start=e0,
+        rms_final=_rms(point_residuals),
+        settled=out.settled,
+        rounds=out.rounds,
+        predicted_rms=predicted_rms(out.robot, out.estimated, cov),
+        n_points=point_residuals.size // 3,
+        one_shot=method == "svd",
+        unsupported=out.unsupported,
+    )
+    checks = audit(facts)
+    status, message = _status(out, checks)
+
+    calibrated = frame.robot_out(out.robot)
+    cov = frame.covariance_out(cov, out.estimated, out.robot)
+    se = dict.fromkeys(names, float("nan"))
+    se.update(zip(out.estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
+    p_nominal, p_final = robot.parameters, calibrated.parameters
+    cal = Calibration(
+        method=method,
+        nominal=robot,
+        robot=calibrated,
+        parameters=tuple(names),
+        estimated=out.estimated,
+        deviations={n: p_final[n] - p_nominal[n] for n in names},
+        standard_errors=se,
+        covariance=cov,
+        residuals=frame.vectors_out(point_residuals).reshape(-1, 3),
+        residuals_before=(y - robot.measured_points(q)).reshape(-1, 3),
+        orientation_residuals=frame.vectors_out(est.orientation_residuals(x0)),
+        outliers=_outliers(make(out.robot, names=names), w, known),
+        loss=loss
+        if loss == "linear"
+        else f"{loss} (scale {loss_scale:g}{' sigma' if known else ' robust sd'})",
+        iterations=out.iterations,
+        status=status,
+        message=message,
+        history=out.history,
+        observability=out.end_analysis,
+        sigma_known=known,
+        wall_time=time.perf_counter() - t_start,
+        start_note=" ".join(t for t in (point_note, start_note) if t),
+        audit=checks,
+        solver_status=out.solver_status,
+        representation=_representation(
+            calibrated,
+            final,
+            frame,
+            partial(make, y=y, orientations=measurements.orientations),
+            names,
+            out,
+        ),
+        pruned=out.pruned,
+        frozen=out.frozen,
+        start_observability=out.start_analysis,
+        rounds=out.rounds,
+        joined=out.joined,
+        pose_blind=_blind_only_here(final, out, names),
+        still_joints=_still_joints(q, robot),
+    )
+    return cal.compare_to(truth) if truth is not None else cal
+
+
+def _representation(calibrated, final, frame, make_world, names, out):
+    """What each estimate stands for, with the base frame in the instrument's frame."""
+    if not frame.is_identity:
+        final = make_world(calibrated, names=names)
+    if out.end_analysis is out.start_analysis:  # one-shot: what it saw where it linearised
+        final = make_world(frame.robot_out(out.start_robot), names=names)
+    return represent(final.jacobian(np.zeros(len(names))), names, out.estimated)
+
+
+def _blind_only_here(final: Problem, out, names) -> tuple[str, ...]:
+    """Held parameters (blind here) that poses across the joint ranges would show."""
+    q_work = workspace_poses(out.robot)
+    held = [n for n in names if n not in out.estimated and n not in out.pruned]
+    if q_work is None or not held:
+        return ()
+    J = workspace_jacobian(out.robot, q_work, names, final)
+    elsewhere = analyse(J, names, q_work.shape[0], prefer=out.estimated).base_parameters
+    return tuple(n for n in held if n in elsewhere)
+
+
+STILL = {"R": np.radians(1.0), "P": 1e-3}
+"""A joint whose values span less than this (1°, 1 mm) in the data barely moves."""
+
+
+def _still_joints(q: np.ndarray, robot: Robot) -> tuple[str, ...]:
+    """Joints that barely move in the data, e.g. ``("q5 = 0.000°",)``."""
+    still = []
+    for i, kind in enumerate(robot.joint_types):
+        if np.ptp(q[:, i]) < STILL[kind]:
+            value = np.degrees(q[0, i]) if kind == "R" else q[0, i] * 1e3
+            still.append(f"q{i + 1} = {value:.3f}{'°' if kind == 'R' else ' mm'}")
+    return tuple(still)
+
+
+def _status(out, checks) -> tuple[int, str]:
+    """The Calibration's status and message: the audit's verdict over the solver's."""
+    if not checks.passed:
+        first, *more = checks.failures
+        also = f" (also failed: {', '.join(c.name for c in more)})" if more else ""
+        return -2, f"failed the answer audit: {first.name}: {first.text}{also}"
+    if out.solver_status > 0:
+        return out.solver_status, out.message or STATUS_MESSAGES[out.solver_status]
+    return 6, STATUS_MESSAGES[6]
+
+
+def _rms(point_residuals: np.ndarray) -> float:
+    """RMS length of point residuals (..., 3), m."""
+    return float(np.sqrt(np.mean(np.sum(np.reshape(point_residuals, (-1, 3)) ** 2, axis=1))))
+
+
+def _check_options(method, bounds, prior, max_iterations, tolerance, loss, loss_scale) -> None:
+    if method not in METHODS:
+        raise CalibrationError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
+    if (bounds or prior) and method != "ipopt":
+        raise CalibrationError("bounds and prior need method='ipopt'")
+    if (
+        isinstance(max_iterations, bool)
+        or not isinstance(max_iterations, int)
+        or max_iterations < 1
+    ):
+        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if not (isinstance(tolerance, int | float) and 0 < tolerance < 1):
+        raise CalibrationError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
+    if loss not in LOSSES:
+        raise CalibrationError(f"unknown loss {loss!r}; use one of {', '.join(LOSSES)}")
+    if not isinstance(loss_scale, int | float) or not (np.isfinite(loss_scale) and loss_scale > 0):
+        raise CalibrationError(f"loss_scale must be a positive number, got {loss_scale!r}")
+
+
+def _orientation_weight(measurements: Measurements, orientation_sigma, known, w) -> float:
+    """1/σ_rot (1/rad) for measured orientations (default: 1 mrad weighs like 0.1 mm)."""
     if orientation_sigma is None:
         orientation_sigma = measurements.orientation_sigma
     if orientation_sigma is not None:
@@ -150,134 +332,40 @@ def identify(
             ) from None
         if not (np.isfinite(orientation_sigma) and orientation_sigma >= 0):
             raise CalibrationError("orientation_sigma must be finite and non-negative (rad)")
-        if orientation_sigma > 0 and not known and R_meas is not None:
+        if orientation_sigma > 0 and not known and measurements.orientations is not None:
             # positions would weigh 1 per metre against 1/σ_rot per radian: ignored
             raise CalibrationError(
                 "an orientation sigma needs the position sigma too (noise=... or a sigma_mm "
                 "column); or give neither, and 1 mrad weighs like 0.1 mm"
             )
     if orientation_sigma:
-        w_rot = 1.0 / orientation_sigma
-    else:  # stated default: 1 mrad weighs like 0.1 mm
-        w_rot = 0.1 * float(np.mean(w))
-    make = partial(Problem, q=q, y=y, w=w, orientations=R_meas, w_rot=w_rot)
-    if prior and not known:
-        raise CalibrationError(
-            "a prior needs the measurement sigma to weigh against; give noise=... (m) or "
-            "measurements with sigma"
-        )
-
-    start, note = _starting_robot(robot, make, names)
-    note = " ".join(t for t in (point_note, note) if t)
-    solver = SOLVERS[method]
-    kwargs = {"max_iterations": max_iterations, "tolerance": tolerance}
-    if method == "ipopt":
-        kwargs.update(bounds=bounds, prior=prior)
-    if loss not in LOSSES:
-        raise CalibrationError(f"unknown loss {loss!r}; use one of {', '.join(LOSSES)}")
-    if not isinstance(loss_scale, int | float) or not (np.isfinite(loss_scale) and loss_scale > 0):
-        raise CalibrationError(f"loss_scale must be a positive number, got {loss_scale!r}")
-    obs, estimated = _analyse(make(start, names=names))
-    base_problem = make(start, names=names).restricted(estimated)
-    problem = base_problem
-    weights = np.ones((q.shape[0], y.shape[1]))
-    iterations, history = 0, []
-    for _ in range(1 if loss == "linear" else 20):
-        x, its, status, hist, message = solver(problem, np.zeros(len(estimated)), **kwargs)
-        iterations += its
-        history += hist if not history else hist[1:]
-        start = start.with_deviations(dict(zip(estimated, x.tolist(), strict=True)))
-        if loss == "linear" or status <= 0:
-            break
-        base_problem = make(start, names=names).restricted(estimated)
-        e = np.linalg.norm(
-            base_problem.point_residuals(np.zeros(len(estimated))) * w[:, None, :], axis=2
-        )  # (N, m), in units of sigma (or m without sigma)
-        c = loss_scale * (1.0 if known else _robust_sd(e))
-        new = _loss_weights(loss, e, c)
-        if np.abs(new - weights).max() < 1e-6:
-            break
-        weights = new
-        problem = base_problem.reweighted(weights)
-    outliers = _outliers(make(start, names=names).restricted(estimated), w)
-    problem = make(start, names=names).restricted(estimated)
-    if loss != "linear":
-        problem = problem.reweighted(weights)
-    x = np.zeros(len(estimated))
-
-    # deviations are from the user's nominal robot; held parameters keep their start value
-    p_nominal, p_final = robot.parameters, start.parameters
-    deviations = {n: p_final[n] - p_nominal[n] for n in names}
-    calibrated = start
-    r_after = problem.residual(x)
-    J = problem.jacobian(x)
-    prior_w = np.array([1.0 / prior[n] if n in prior else 0.0 for n in estimated])
-    cov, se = uncertainty(J, r_after, known, names, estimated, prior_w)
-    cal = Calibration(
-        method=method,
-        nominal=robot,
-        robot=calibrated,
-        parameters=tuple(names),
-        estimated=tuple(estimated),
-        deviations=deviations,
-        standard_errors=se,
-        covariance=cov,
-        residuals=problem.point_residuals(x).reshape(-1, 3),
-        residuals_before=(y - robot.measured_points(q)).reshape(-1, 3),
-        orientation_residuals=problem.orientation_residuals(x),
-        outliers=outliers,
-        loss=loss
-        if loss == "linear"
-        else f"{loss} (scale {loss_scale:g}{' sigma' if known else ' robust sd'})",
-        iterations=iterations,
-        status=status,
-        message=message or STATUS_MESSAGES[status],
-        history=tuple(float(h) for h in history),
-        observability=obs,
-        sigma_known=known,
-        wall_time=time.perf_counter() - t_start,
-        start_note=note,
-    )
-    return cal.compare_to(truth) if truth is not None else cal
-
-
-LOSSES = ("linear", "huber", "soft_l1")
-
-
-def _loss_weights(loss: str, e: np.ndarray, c: float) -> np.ndarray:
-    """IRLS weights of residual norms `e` for a robust loss of scale `c`."""
-    if loss == "huber":
-        return np.where(e <= c, 1.0, c / np.maximum(e, 1e-300))
-    return 1.0 / np.sqrt(1.0 + (e / c) ** 2)
-
-
-def _robust_sd(e: np.ndarray) -> float:
-    """Standard deviation of one coordinate from the median of point-residual norms.
-
-    For Gaussian noise the norm of a 3-vector has median ≈ 1.538 σ.
-    """
-    return float(np.median(e)) / 1.538 or 1e-12
+        return 1.0 / orientation_sigma
+    return 0.1 * float(np.mean(w))
 
 
 OUTLIER_THRESHOLD = 5.0
 """Robust standard deviations (1.4826 MAD) above the median that make a pose stand out."""
 
+OUTLIER_MINIMUM = {True: 4.0, False: 1e-9}
+"""Residual norm a pose must also exceed to be listed: 4 σ with a stated σ (a 3-D
+Gaussian norm passes it once in a thousand), else 1 nm (below it, residuals are rounding)."""
 
-def _outliers(problem: Problem, w: np.ndarray) -> tuple[int, ...]:
+
+def _outliers(problem: Problem, w: np.ndarray, known: bool) -> tuple[int, ...]:
     """Poses whose largest point residual stands out from the others.
 
     A pose is listed when its largest (σ-weighted) point-residual norm lies more than
-    `OUTLIER_THRESHOLD` robust standard deviations above the median of all poses. The
-    norm of Gaussian noise in 3-D has a long right tail, hence 5 rather than 3.
+    `OUTLIER_THRESHOLD` robust standard deviations above the median of all poses, and
+    above `OUTLIER_MINIMUM`. The norm of Gaussian noise in 3-D has a long right tail,
+    hence 5 rather than 3.
     """
     e = np.linalg.norm(
         problem.point_residuals(np.zeros(len(problem.names))) * w[:, None, :], axis=2
     ).max(axis=1)
     med = np.median(e)
     spread = 1.4826 * np.median(np.abs(e - med))
-    if spread == 0:
-        return ()
-    return tuple(int(i) for i in np.flatnonzero(e > med + OUTLIER_THRESHOLD * spread))
+    limit = max(med + OUTLIER_THRESHOLD * spread, OUTLIER_MINIMUM[known])
+    return tuple(int(i) for i in np.flatnonzero(e > limit))
 
 
 def _with_points(robot: Robot, m: int) -> tuple[Robot, str]:
@@ -295,109 +383,6 @@ def _with_points(robot: Robot, m: int) -> tuple[Robot, str]:
         f"The {m} measured points started at the tool origin (their positions on the tool "
         "were not given) and were fitted."
     )
-
-
-def _prefit_frames(start: Robot, make, names) -> Robot:
-    """Fit the base and tool frames alone before everything else.
-
-    With the tool offset still at zero the measured point lies on the wrist's axes, and the
-    wrist's twists look blind; fitting the (well-conditioned) frames first puts the
-    linearisation where the whole identification can see what it should.
-    """
-    frames = [n for n in names if n.startswith(("base_", "tool_", "point"))]
-    try:
-        _, est = _analyse(make(start, names=frames))
-    except CalibrationError:
-        return start
-    x, *_ = SOLVERS["gauss-newton"](
-        make(start, names=frames).restricted(est),
-        np.zeros(len(est)),
-        max_iterations=50,
-        tolerance=1e-10,
-    )
-    return start.with_deviations(dict(zip(est, x.tolist(), strict=True)))
-
-
-def _starting_robot(robot: Robot, make, names) -> tuple[Robot, str]:
-    """Where to linearise: the nominal robot, or with a base frame from a rigid fit.
-
-    When base parameters are to be identified, the measured points may be in a far-away,
-    turned instrument frame. A rigid fit of the nominal positions to the measured ones
-    (`casecal.model.frames.rigid_fit`) gives a base frame close enough for Gauss-Newton, whatever
-    the offset and angle; it is kept only if it lowers the residual.
-    """
-    base = [n for n in names if n.startswith("base_")]
-    if not base:
-        return robot, ""
-    probe = make(robot, names=base)
-    y, q, w = probe.y.reshape(-1, 3), probe.q, probe.w
-    model = robot.measured_points(q).reshape(-1, 3)
-    R, t = rigid_fit(model, y, weights=np.repeat(np.mean(w**2, axis=1), probe.m))
-    fit = np.eye(4)
-    fit[:3, :3], fit[:3, 3] = R, t
-    T = fit @ robot.base.matrix()
-    values = dict(zip(("base_x", "base_y", "base_z"), T[:3, 3].tolist(), strict=True))
-    values.update(zip(("base_rx", "base_ry", "base_rz"), rpy_from_matrix(T[:3, :3]), strict=True))
-    start = robot.with_parameters({n: values[n] for n in base})
-    before = np.sum(probe.residual(np.zeros(len(base))) ** 2)
-    after = np.sum(make(start, names=base).residual(np.zeros(len(base))) ** 2)
-    if not after < before:
-        return robot, ""
-    start = _prefit_frames(start, make, names)
-    moved = np.linalg.norm(T[:3, 3] - robot.base.matrix()[:3, 3])
-    angle = np.degrees(np.arccos(np.clip((np.trace(fit[:3, :3]) - 1) / 2, -1.0, 1.0)))
-    return start, (
-        f"The base frame started from a rigid fit of the nominal positions to the measured "
-        f"ones ({moved * 1e3:.1f} mm and {angle:.2f}° from the nominal base), then base and "
-        "tool were fitted alone before all parameters; frame parameters the data cannot "
-        "separate are held at that start."
-    )
-
-
-def _analyse(full: Problem):
-    """Identifiability at `full`'s robot, and the base set to estimate (checked)."""
-    obs = _nominal_analysis(full)
-    names = full.names
-    n_poses, rows = full.q.shape[0], full.w_flat.size
-    if obs.rank >= rows and len(names) > obs.rank:
-        # the data, not the robot's structure, limit what can be seen
-        raise CalibrationError(
-            f"{n_poses} poses give {rows} coordinates, fewer than the "
-            f"{len(names)} parameters asked for, so they cannot tell which are blind; "
-            f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
-        )
-    if not obs.base_parameters:
-        raise CalibrationError(
-            f"none of the asked-for parameters ({', '.join(names)}) moves the measured point at "
-            "these poses; ask for others or measure other poses"
-        )
-    return obs, obs.base_parameters
-
-
-_NOMINAL: OrderedDict = OrderedDict()
-_NOMINAL_SIZE = 16
-
-
-def _nominal_analysis(full: Problem):
-    """Identifiability at nominal, shared by every fit of the same robot, poses and weights.
-
-    Studies fit many noise realisations of the same poses: the nominal Jacobian and its
-    analysis are computed once (LRU of `_NOMINAL_SIZE`) and seeded into `full`'s memo.
-    """
-    p0 = full.p0.tobytes()
-    R = b"" if full.R is None else full.R.tobytes()
-    key = (full.robot.structure, p0, full.q.tobytes(), full.w_flat.tobytes(), R, full.names)
-    hit = _NOMINAL.get(key)
-    if hit is None:
-        obs = analyse(full.jacobian(np.zeros(len(full.names))), full.names, full.q.shape[0])
-        memo = {k: v for k, v in full._memo.items() if k[1] == p0}
-        hit = _NOMINAL[key] = (obs, memo)
-        if len(_NOMINAL) > _NOMINAL_SIZE:
-            _NOMINAL.popitem(last=False)
-    else:
-        _NOMINAL.move_to_end(key)
-        full._memo.update(hit[1])
-    return hit[0]
 
 
 def _check_bounds(bounds: dict) -> dict:
@@ -428,35 +413,3 @@ def _check_prior(prior: dict) -> dict:
             )
         out[name] = sd
     return out
-
-
-def uncertainty(J, r, known: bool, names, estimated, prior_w=None) -> tuple[np.ndarray, dict]:
-    """Covariance of the estimated deviations and standard errors of all asked-for names
-    (NaN for those held), from the weighted Jacobian `J` and residuals `r` at the solution."""
-    cov = _covariance(J, r, known, prior_w)
-    se = dict.fromkeys(names, float("nan"))
-    se.update(zip(estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
-    return cov, se
-
-
-def _covariance(J: np.ndarray, r: np.ndarray, known: bool, prior_w=None) -> np.ndarray:
-    """``(JᵀJ + W_p²)⁻¹`` of the weighted Jacobian and prior weights ``W_p = 1/σ_p``.
-
-    Scaled by the residual variance ``RSS / (3N - k)`` when σ is unknown; NaN when there
-    are no residual degrees of freedom to estimate it from.
-    """
-    k = J.shape[1]
-    if k == 0:
-        return np.zeros((0, 0))
-    if prior_w is not None and np.any(prior_w > 0):
-        J = np.vstack([J, np.diag(prior_w)])
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    _, s, Vt = np.linalg.svd(triangular(J / norms)[0], full_matrices=False)
-    keep = s > nr_threshold(s, J.shape)
-    inv = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
-    cov = inv / np.outer(norms, norms)
-    if not known:
-        dof = r.size - k
-        cov = cov * (float(r @ r) / dof if dof > 0 else np.nan)
-    return cov

@@ -2,7 +2,9 @@
 
 Each takes a `Problem` (weighted residuals and Jacobians of the deviations ``x`` of the
 estimated parameters) and returns ``(x, iterations, status, history, message)`` with the
-statuses of `casecal.calibration.STATUS_MESSAGES`.
+statuses of `casecal.identification.calibration.STATUS_MESSAGES`. The iterated solvers
+stop when the step, or the cost decrease that the next Gauss-Newton step predicts, falls
+under the tolerance, so a converged fit is not walked through a line search of tiny steps.
 """
 
 from __future__ import annotations
@@ -10,183 +12,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..data.measurements import rotation_vector
 from ..errors import CalibrationError
-from ..model import kinematics
-from ..model.robot import Robot
-
-
-def nr_threshold(s: np.ndarray, shape: tuple[int, int]) -> float:
-    """Numerical Recipes' singular-value cut-off: ``0.5 √(m + n + 1) · s_max · ε``.
-
-    Singular values below it are rounding noise and are set to zero in the pseudo-inverse
-    (Press et al., *Numerical Recipes*, 3rd ed., §2.6), as the paper does.
-    """
-    m, n = shape
-    return 0.5 * np.sqrt(m + n + 1.0) * (s[0] if s.size else 0.0) * np.finfo(float).eps
-
-
-def triangular(J: np.ndarray, r: np.ndarray | None = None):
-    """Reduce a tall ``J`` (and ``r``) to the R factor of its QR decomposition.
-
-    ``J = Q R`` keeps every inner product of columns (``JᵀJ = RᵀR``), so the singular values,
-    right singular vectors and least-squares solution of ``J`` are those of the small R,
-    with ``Qᵀ r`` in place of ``r``. QR of ``[J | r]`` gives both at once, several times
-    faster than an SVD of the tall ``J``.
-
-    Returns
-    -------
-    R : ndarray, shape (min(m, k), k)
-    Qtr : ndarray, shape (min(m, k),) or None
-    """
-    m, k = J.shape
-    if r is None:
-        return (np.linalg.qr(J, mode="r") if m > k else J), None
-    if m <= k:
-        return J, r
-    Ra = np.linalg.qr(np.column_stack([J, r]), mode="r")
-    return Ra[:k, :k], Ra[:k, k]
-
-
-def svd_solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """``x = D V S⁺ Uᵀ r`` for the column-scaled ``J D``: the paper's SVD least squares.
-
-    Computed on the R factor of ``J D`` (`triangular`): the same singular values and V.
-    """
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    R, Qtr = triangular(J / norms, r)
-    U, s, Vt = np.linalg.svd(R, full_matrices=False)
-    keep = s > nr_threshold(s, J.shape)
-    z = Vt[keep].T @ ((U[:, keep].T @ Qtr) / s[keep])
-    return z / norms
-
-
-class Problem:
-    """Weighted residuals and Jacobians of the deviations ``x`` of chosen parameters.
-
-    Per pose the residual stacks the m measured points (3m rows, m) and, when orientations
-    were measured, the rotation vector ``log(R_meas R_modelᵀ)`` (3 rows, rad), each row
-    divided by its σ.
-
-    Parameters
-    ----------
-    robot : Robot
-        The robot to linearise at.
-    q : ndarray, shape (N, dof)
-    y : ndarray, shape (N, 3) or (N, m, 3)
-        Measured positions, m (m must match the robot's points; 1 without points).
-    w : ndarray, shape (N, 3)
-        Position weights 1/σ per pose and axis, shared by a pose's points.
-    names : sequence of str
-        The parameters whose deviations are ``x``.
-    kernel_names : sequence of str, optional
-        A superset of `names` to evaluate Jacobians for (then sliced): one compiled kernel
-        then serves both the identifiability analysis of all asked-for parameters and the
-        fit of their base set.
-    orientations : ndarray, shape (N, 3, 3), optional
-        Measured tool rotations.
-    w_rot : float
-        Orientation weight 1/σ_rot, 1/rad.
-    """
-
-    def __init__(
-        self, robot: Robot, q, y, w, names, kernel_names=None, orientations=None, w_rot: float = 0.0
-    ):
-        self.robot = robot
-        self.chain = kinematics.chain(robot.structure)
-        n = q.shape[0]
-        self.q = q
-        self.y = np.asarray(y, dtype=float).reshape(n, -1)  # (N, 3m)
-        self.m = self.y.shape[1] // 3
-        self.w = w
-        self.names = tuple(names)
-        kernel_names = tuple(kernel_names or names)
-        self.columns = self.chain.columns(self.names)
-        self.kernel_columns = self.chain.columns(kernel_names)
-        self.take = [kernel_names.index(n) for n in self.names]
-        self.p0 = robot.vector()
-        self.R = orientations
-        self.w_rot = float(w_rot)
-        rows = [np.tile(w, (1, self.m))]
-        if orientations is not None:
-            rows.append(np.full((n, 3), self.w_rot))
-        self.w_rows = np.hstack(rows)  # (N, rows per pose)
-        self.w_flat = self.w_rows.ravel()
-        self._memo: dict = {}  # (kind, p bytes) -> array; shared with `restricted` copies
-
-    def reweighted(self, point_weights: np.ndarray) -> Problem:
-        """The same problem with each measured point's rows scaled by √weight (N, m).
-
-        For iteratively reweighted least squares (robust losses); orientation rows keep
-        the weight of the pose's least-trusted point.
-        """
-        other = self.restricted(self.names)
-        scale = np.sqrt(np.repeat(point_weights, 3, axis=1))
-        if self.R is not None:
-            scale = np.hstack([scale, np.repeat(scale.min(axis=1, keepdims=True), 3, axis=1)])
-        other.w_rows = self.w_rows * scale
-        other.w_flat = other.w_rows.ravel()
-        other._memo = self._memo
-        return other
-
-    def restricted(self, names) -> Problem:
-        """The same data and kernel for a subset of the parameters (shares the memo)."""
-        other = Problem.__new__(Problem)
-        other.__dict__.update(self.__dict__)
-        other.names = tuple(names)
-        other.columns = self.chain.columns(other.names)
-        kernel_names = [self.chain.names[c] for c in self.kernel_columns]
-        other.take = [kernel_names.index(n) for n in other.names]
-        return other
-
-    def _evaluate(self, kind: str, p: np.ndarray) -> np.ndarray:
-        # solvers, the identifiability analysis and the result ask for the same points
-        key = (kind, p.tobytes())
-        value = self._memo.get(key)
-        if value is None:
-            columns = self.kernel_columns if kind.endswith("jacobian") else ()
-            value = self.chain.evaluate(kind, self.q, p, columns)
-            if len(self._memo) >= 8:
-                self._memo.pop(next(iter(self._memo)))
-            self._memo[key] = value
-        return value
-
-    def p(self, x: np.ndarray) -> np.ndarray:
-        p = self.p0.copy()
-        p[list(self.columns)] += x
-        return p
-
-    def point_residuals(self, x: np.ndarray) -> np.ndarray:
-        """Unweighted ``y - f`` of the points, shape (N, m, 3), m."""
-        f = self._evaluate("points", self.p(x))
-        return (self.y - f).reshape(len(self.q), self.m, 3)
-
-    def orientation_residuals(self, x: np.ndarray) -> np.ndarray | None:
-        """Unweighted ``log(R_meas R_modelᵀ)``, shape (N, 3), rad; None without data."""
-        if self.R is None:
-            return None
-        R_model = self._evaluate("fk", self.p(x))[:, :3, :3]
-        return rotation_vector(self.R @ np.swapaxes(R_model, 1, 2))
-
-    def residual(self, x: np.ndarray) -> np.ndarray:
-        """Weighted residuals, shape (N · rows per pose,), pose-major."""
-        parts = [self.point_residuals(x).reshape(len(self.q), -1)]
-        if self.R is not None:
-            parts.append(self.orientation_residuals(x))
-        return (np.hstack(parts) * self.w_rows).ravel()
-
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """Weighted ``∂f/∂x``, shape (N · rows per pose, k)."""
-        p = self.p(x)
-        k = len(self.kernel_columns)
-        parts = [self._evaluate("points_jacobian", p)]  # (N, 3m, k)
-        if self.R is not None:
-            parts.append(self._evaluate("pose_jacobian", p)[:, 3:, :])  # rotation rows
-        J = np.concatenate(parts, axis=1).reshape(-1, k)
-        if len(self.take) != J.shape[1]:
-            J = J[:, self.take]
-        return J * self.w_flat[:, None]
+from .linalg import gauss_newton_step, svd_solve
+from .problem import Problem
 
 
 def _svd(problem: Problem, x0, **_):
@@ -196,10 +24,18 @@ def _svd(problem: Problem, x0, **_):
     return x, 1, 1, [0.5 * r0 @ r0, 0.5 * r1 @ r1], None
 
 
-def _floor(problem: Problem) -> float:
-    """Cost below which the residuals are rounding noise of the measured coordinates."""
-    eps = np.finfo(float).eps
-    return 0.5 * np.sum((4 * eps * np.abs(problem.y).max() * problem.w_flat) ** 2)
+STOP = 4 * np.finfo(float).eps
+"""The solvers stop when residuals fall below this fraction of the largest coordinate."""
+
+ROUNDING = 256 * np.finfo(float).eps
+"""Residuals below this fraction of the largest measured coordinate are rounding (the
+audit's floor): the forward kinematics of a seven-link chain loses some tens of ε in its
+products, so a solver may stop above `STOP` with nothing left to gain."""
+
+
+def floor_cost(problem: Problem, fraction: float = STOP) -> float:
+    """Cost below which residuals are `fraction` of the largest measured coordinate."""
+    return 0.5 * np.sum((fraction * np.abs(problem.y).max() * problem.w_flat) ** 2)
 
 
 def _start(problem: Problem, x0):
@@ -207,35 +43,42 @@ def _start(problem: Problem, x0):
     x = x0.copy()
     r = problem.residual(x)
     cost = 0.5 * r @ r
-    return x, r, cost, [cost], _floor(problem)
+    return x, r, cost, [cost], floor_cost(problem)
+
+
+def _converged(predicted: float, cost: float, tolerance: float, floor: float) -> bool:
+    """Whether the cost decrease one more step predicts is negligible."""
+    return predicted <= tolerance * cost + floor
 
 
 def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, **_):
     x, r, cost, history, floor = _start(problem, x0)
     for it in range(1, max_iterations + 1):
         J = problem.jacobian(x)
-        step = svd_solve(J, r)
+        step, predicted = gauss_newton_step(J, r)
+        done = _converged(predicted, cost, tolerance, floor)
         t = 1.0
         while True:  # halve the step until the cost goes down (damped Gauss-Newton)
             x_new = x + t * step
             r_new = problem.residual(x_new)
             cost_new = 0.5 * r_new @ r_new
-            if cost_new < cost or t < 1e-3:
+            if cost_new < cost or t < 1e-3 or done:
                 break
             t *= 0.5
-        if cost_new >= cost:
+        if cost_new < cost:
+            norms = np.linalg.norm(J, axis=0)
+            small = np.linalg.norm(t * step * norms) <= tolerance * (
+                np.linalg.norm(x * norms) + tolerance
+            )
+            x, r, cost = x_new, r_new, cost_new
             history.append(cost)
-            return x, it, 3, history, None
-        norms = np.linalg.norm(J, axis=0)
-        small = np.linalg.norm(t * step * norms) <= tolerance * (
-            np.linalg.norm(x * norms) + tolerance
-        )
-        x, r, cost = x_new, r_new, cost_new
-        history.append(cost)
-        if cost <= floor:
-            return x, it, 4, history, None
-        if small:
-            return x, it, 2, history, None
+            if cost <= floor:
+                return x, it, 4, history, None
+            if small or done:
+                return x, it, 2, history, None
+        else:
+            history.append(cost)
+            return x, it, 2 if done else 3, history, None
     return x, max_iterations, 0, history, None
 
 
@@ -249,6 +92,16 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, **_):
         Js = J / norms  # work in scaled variables z = x * norms
         A = Js.T @ Js
         g = Js.T @ r
+        # the undamped step's predicted decrease, from the normal equations: a
+        # convergence test only, so their squared condition number does no harm
+        h_gn = np.linalg.lstsq(A, g, rcond=1e-12)[0]
+        if _converged(0.5 * float(g @ h_gn), cost, tolerance, floor):
+            # nothing measurable left to gain: take the undamped step if it helps, stop
+            r_gn = problem.residual(x + h_gn / norms)
+            if 0.5 * r_gn @ r_gn < cost:
+                x, cost = x + h_gn / norms, 0.5 * r_gn @ r_gn
+            history.append(cost)
+            return x, it, 4 if cost <= floor else 2, history, None
         if mu is None:
             mu = 1e-6 * float(np.max(np.diag(A)))
         h = np.linalg.solve(A + mu * np.eye(len(g)), g)
@@ -281,13 +134,14 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, **_):
 class _LeastSquares:
     """Objective ``0.5 (|r(z)|² + |w_p z|²) / scale``, its gradient and Gauss-Newton Hessian.
 
-    ``z = x · norms`` are the column-scaled deviations; ``w_p`` the prior's weights. The
-    Jacobian at the last point is kept, since IPOPT asks for gradient and Hessian at the
-    same point.
+    ``z = x · norms`` are the column-scaled deviations; ``w_p`` the prior's weights, the
+    prior centred on nominal, ``z_0`` from the start of this fit. The Jacobian at the last
+    point is kept, since IPOPT asks for gradient and Hessian at the same point.
     """
 
-    def __init__(self, problem: Problem, norms, scale, prior_w):
+    def __init__(self, problem: Problem, norms, scale, prior_w, z0):
         self.problem, self.norms, self.scale, self.prior_w = problem, norms, scale, prior_w
+        self.z0 = z0
         self._at, self._J = None, None
 
     def _jacobian(self, z):
@@ -297,11 +151,11 @@ class _LeastSquares:
 
     def value(self, z):
         r = self.problem.residual(z / self.norms)
-        return 0.5 * (r @ r + np.sum((self.prior_w * z) ** 2)) / self.scale
+        return 0.5 * (r @ r + np.sum((self.prior_w * (z + self.z0)) ** 2)) / self.scale
 
     def gradient(self, z):
         r = self.problem.residual(z / self.norms)
-        return (-self._jacobian(z).T @ r + self.prior_w**2 * z) / self.scale
+        return (-self._jacobian(z).T @ r + self.prior_w**2 * (z + self.z0)) / self.scale
 
     def hessian(self, z):
         J = self._jacobian(z)
@@ -340,7 +194,7 @@ class _Callback(ca.Callback):
         return self._keep
 
 
-def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior):
+def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior, prior_offset=None):
     """IPOPT on the scaled problem, objective normalised by its start value, GN Hessian.
 
     The objective, its gradient and the Gauss-Newton Hessian ``JᵀJ`` are CasADi Callbacks
@@ -357,10 +211,11 @@ def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior):
     norms = np.linalg.norm(problem.jacobian(x0), axis=0)
     norms[norms == 0] = 1.0
     r0 = problem.residual(x0)
-    scale = max(0.5 * r0 @ r0, _floor(problem))
+    scale = max(0.5 * r0 @ r0, floor_cost(problem))
     sig = np.array([prior.get(name, np.inf) for name in problem.names])
     prior_w = np.where(np.isfinite(sig), 1.0 / sig, 0.0) / norms  # per z
-    ls = _LeastSquares(problem, norms, scale, prior_w)
+    z0 = np.zeros(k) if prior_offset is None else prior_offset * norms
+    ls = _LeastSquares(problem, norms, scale, prior_w, z0)
     dense = ca.Sparsity.dense
     z_sp, scalar, empty = dense(k, 1), dense(1, 1), dense(0, 1)
     gradient = _Callback(
@@ -408,6 +263,8 @@ def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior):
     message = None if ok else f"failed: IPOPT returned {stats.get('return_status')}"
     if stats.get("return_status") == "Maximum_Iterations_Exceeded":
         status, message = 0, None
+    elif stats.get("return_status") == "Search_Direction_Becomes_Too_Small":
+        status, message = 3, None  # no step lowers the cost: the audit judges optimality
     return x_opt, int(stats.get("iter_count", 0)), status, history, message
 
 

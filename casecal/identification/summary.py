@@ -52,7 +52,9 @@ def format_table(df: pd.DataFrame) -> str:
 
 def _short_status(status: str) -> str:
     if status.startswith("held"):
-        return "held at nominal" if status.endswith("unidentifiable") else "held at start"
+        if "not determined" in status:
+            return "held: not determined"
+        return "held at fitted value" if "fitted to while" in status else "held at nominal"
     if status == "poorly determined":
         return "POORLY DETERMINED"
     if status.startswith("stands for"):
@@ -61,7 +63,7 @@ def _short_status(status: str) -> str:
 
 
 def build_summary(cal: Calibration) -> Summary:
-    """Header, table, diagnostics and numbered notes of `cal`."""
+    """Header, audit, table, diagnostics and numbered notes of `cal`."""
     obs = cal.observability
     left = [
         ("Robot:", f"{cal.nominal.name} ({cal.nominal.joint_types}, {cal.nominal.convention})"),
@@ -69,7 +71,7 @@ def build_summary(cal: Calibration) -> Summary:
         ("Status:", f"{cal.status} ({'success' if cal.success else 'FAILED'})"),
         ("Poses:", f"{cal.n_poses} ({cal.dof_residual + len(cal.estimated)} coordinates)"),
         ("Parameters:", f"{len(cal.parameters)} asked, {len(cal.estimated)} estimated"),
-        ("Iterations:", str(cal.iterations)),
+        ("Iterations:", f"{cal.iterations} in {cal.rounds} round{'s' * (cal.rounds != 1)}"),
     ]
     right = [
         ("RMS before:", f"{cal.rms_before * 1e3:.6f} mm"),
@@ -82,13 +84,14 @@ def build_summary(cal: Calibration) -> Summary:
     title = "casecal calibration results".center(WIDTH)
     rule = "=" * WIDTH
     body = [f"{a:<13}{b:<35}{c:<18}{d}" for (a, b), (c, d) in zip(left, right, strict=True)]
-    header = "\n".join([rule, title, rule, *body, f"Message: {cal.message}"])
+    header = [rule, title, rule, *body, f"Message: {cal.message}"]
+    if cal.audit is not None:
+        header += ["Answer audit:", *(f"  {line}" for line in cal.audit.lines())]
     s = obs.singular_values
     diag = [
         f"Observability of the {len(obs.parameters)} asked-for parameters (column-scaled "
-        f"Jacobian at the {'start' if cal.start_note else 'nominal robot'}): "
-        f"rank {obs.rank} of {len(obs.parameters)}",
-        "  indices of the estimated set: "
+        f"Jacobian where the fit ended): rank {obs.rank} of {len(obs.parameters)}",
+        "  indices of the structural base set: "
         + ", ".join(f"{k} = {v:.4g}" for k, v in obs.indices.items()),
         f"  singular values: largest {s[0]:.4g}, smallest non-zero "
         f"{s[obs.rank - 1] if obs.rank else 0:.4g}"
@@ -96,23 +99,38 @@ def build_summary(cal: Calibration) -> Summary:
         else "  no parameters",
     ]
     return Summary(
-        header=header, table=cal.table, diagnostics="\n".join(diag), notes=tuple(_notes(cal))
+        header="\n".join(header),
+        table=cal.table,
+        diagnostics="\n".join(diag),
+        notes=tuple(_notes(cal)),
     )
 
 
 def _notes(cal: Calibration) -> list[str]:
     notes = []
-    obs = cal.observability
     if not cal.success:
-        notes.append(f"The fit did not converge: {cal.message}. Do not use these values.")
+        reasons = (
+            "; ".join(f"{c.name}: {c.text}" for c in cal.audit.failures)
+            if cal.audit is not None and cal.audit.failures
+            else cal.message
+        )
+        notes.append(f"The fit FAILED: {reasons}. Do not use these values.")
     if cal.start_note:
         notes.append(cal.start_note)
-    chi2 = cal.reduced_chi2
-    if chi2 > 4:
+    if cal.joined:
         notes.append(
-            f"The residuals are {np.sqrt(chi2):.1f}× the stated noise (reduced χ² = {chi2:.3g}): "
-            "the model does not fit these data (a parameter missing from the set, a wrong "
-            "frame, outliers or a wrong sigma). Do not trust these values as they are."
+            f"{_names(cal.joined)} moved nothing measured where the fit started but do where "
+            "it ended (a tool point off the axes it started on, for instance); later rounds "
+            "estimated them."
+        )
+    notes += _held_notes(cal)
+    if cal.pose_blind:
+        still = f" ({', '.join(cal.still_joints)} in every pose)" if cal.still_joints else ""
+        notes.append(
+            f"{_names(cal.pose_blind)} cannot be told apart at these poses{still}, but poses "
+            "across the joint ranges would separate them: the calibrated robot is right on "
+            "poses like the measured ones, and elsewhere these parameters' own deviations "
+            "show. Measure poses that move every joint to calibrate them."
         )
     if cal.loss != "linear":
         notes.append(f"Robust fit: {cal.loss} loss, by iteratively reweighted least squares.")
@@ -124,14 +142,6 @@ def _notes(cal: Calibration) -> list[str]:
             f"{len(cal.outliers)} poses stand out (file rows {rows}): check them, or fit with "
             "a robust loss (--loss huber)."
         )
-    if obs.blind_spots:
-        held = ", ".join(cal.held) if cal.held else "none"
-        notes.append(
-            f"The data cannot identify {len(obs.unidentifiable)} of the asked-for parameters "
-            f"individually; held at nominal (or at the start of the fit): {held}."
-        )
-        for spot in obs.blind_spots:
-            notes.append(spot.text + ".")
     poor = cal.poorly_determined
     if poor:
         shown = ", ".join(f"{n} ± {_se_text(n, cal.standard_errors[n])}" for n in poor[:6]) + (
@@ -142,12 +152,12 @@ def _notes(cal: Calibration) -> list[str]:
             f"{shown}. The poses barely constrain them and noise is amplified along them; "
             "do not use them without more or better-spread poses."
         )
-    cond = obs.indices.get("O2", np.inf)
+    cond = cal.observability.indices.get("O2", np.inf)
     if np.isfinite(cond) and cond > CONDITION_WARNING:
         notes.append(
-            f"The condition number of the estimated set is {cond:.3g}: some combinations are "
-            "barely observable from these poses, and noise is amplified along them. More or "
-            "better-spread poses help."
+            f"The condition number of the structural base set is {cond:.3g}: some "
+            "combinations are barely observable from these poses, and noise is amplified "
+            "along them. More or better-spread poses help."
         )
     if not cal.sigma_known:
         notes.append(
@@ -155,6 +165,52 @@ def _notes(cal: Calibration) -> list[str]:
             f"({_residual_scale(cal) * 1e3:.3g} mm per coordinate)."
         )
     return notes
+
+
+def _held_notes(cal: Calibration) -> list[str]:
+    """What was held and why, and what the estimates then stand for; counts match lists."""
+    notes = []
+    blind = [n for n in cal.held if n not in cal.pruned and n not in cal.frozen]
+    if blind:
+        inert = [n for n in blind if cal.held_reason(n).startswith("it moves nothing")]
+        carried = [n for n in blind if n not in inert]
+        text = (
+            f"{len(blind)} of the asked-for parameters are blind at these poses and held at "
+            f"nominal: {_names(blind)}."
+        )
+        if inert:
+            verb = "moves" if len(inert) == 1 else "move"
+            text += f" {len(inert)} of them {verb} nothing measured: {_names(inert)}."
+        if carried:
+            text += (
+                f" The effects of the other {len(carried)} are carried by the estimates "
+                "below, which stand for combinations."
+            )
+        notes.append(text)
+    combos = [n for n in cal.estimated if cal.stands_for(n) != n]
+    if combos:
+        notes.append(
+            f"{len(combos)} estimates stand for combinations (their row gives the value and "
+            "interval of the combination, not of the parameter alone): "
+            + "; ".join(f"{n} = {cal.stands_for(n)}" for n in combos)
+            + "."
+        )
+    if cal.frozen:
+        notes.append(
+            f"{len(cal.frozen)} parameters were estimated in an earlier round but are blind "
+            "where the fit ended; they are held at the values they were fitted to while "
+            f"visible (any value fits as well): {_names(cal.frozen)}."
+        )
+    if cal.pruned:
+        notes.append(
+            f"{len(cal.pruned)} parameters are held at nominal because these data do not "
+            "determine them: " + "; ".join(f"{n}: {why}" for n, why in cal.pruned.items()) + "."
+        )
+    return notes
+
+
+def _names(names) -> str:
+    return ", ".join(names)
 
 
 def _se_text(name: str, se: float) -> str:

@@ -13,6 +13,7 @@ from ..model.robot import Robot
 from .fit import identify
 
 FRAME_PARAMETERS = ("base_*", "tool_x", "tool_y", "tool_z", "point*")
+CONVERGENCE_CHECKS = ("converged", "residual did not grow")
 
 
 @dataclass(frozen=True)
@@ -62,8 +63,13 @@ def refit_frames(robot: Robot, measurements: Measurements) -> ErrorStats:
         raise CalibrationError(
             f"cannot refit the frames to the held-out data ({exc}); measure more poses"
         ) from None
-    if not cal.success:
-        raise CalibrationError(f"the frames did not fit the held-out data: {cal.message}")
+    # the nominal robot's frames cannot fit to the noise (its DH errors remain): that is
+    # what is measured here, so only a fit that did not converge is an error
+    failed = [c for c in cal.audit.failures if c.name in CONVERGENCE_CHECKS]
+    if failed:
+        raise CalibrationError(
+            f"the frames did not fit the held-out data: {failed[0].name}: {failed[0].text}"
+        )
     return ErrorStats.of(cal.residuals)
 
 

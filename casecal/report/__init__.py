@@ -13,9 +13,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from .common import StudyResult, style
+from .pose_count import pose_count_sweep
 from .studies_beyond import enough_poses, optimal_poses, relative_measurements
 from .studies_paper import planar_arms, scara_observability, table1
-from .studies_sweeps import noise_sweep, pose_count_sweep, six_axis
+from .studies_sweeps import noise_sweep, six_axis
 
 STUDIES: dict[str, Callable] = {
     "table1": table1,

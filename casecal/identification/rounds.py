@@ -1,0 +1,427 @@
+"""The fit in rounds: estimate a base set, look again where the fit ended, repeat.
+
+What the data can see depends on where the robot model is linearised. At a nominal robot
+whose tool point sits on the wrist's axes, the wrist's angles move nothing; at the true
+robot, a few millimetres off those axes, they do. And a parameter the poses determine only
+to within metres is no estimate at all. So a fit runs in rounds:
+
+1. estimate the structural base set at the start (`casecal.identification.analysis`;
+   frames first, so the held parameters are joint parameters at their nominal values);
+2. where the fit ended, analyse again. A parameter that has become visible joins the set;
+   it never replaces one already estimated (a wrist angle that a fitted 45 µm tool offset
+   makes visible must not stand in for that offset), and if a dependency appears, the
+   latest to join yields. A parameter the data do not determine is held (the
+   *noise-aware rank*, `prune`);
+3. repeat until the set no longer changes (at most `MAX_ROUNDS`).
+
+Parameters held for the noise go back to their start values (nominal, in the fit frame),
+never to a value some intermediate fit guessed. One that was estimated in an earlier round
+and is blind where the fit ended keeps the value it was fitted to while visible: any value
+fits as well there, and resetting it would only be compensated to first order. Gauss-Newton
+that stalls in a curved valley is continued by Levenberg-Marquardt within the round. The
+one-shot ``"svd"`` method is the paper's procedure and runs a single round without pruning.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..design.poses import uniform
+from ..errors import CalibrationError
+from ..model.parameters import unit
+from ..model.robot import Robot
+from .analysis import Observability, analyse, pivot_order
+from .linalg import gauss_newton_step
+from .problem import Problem
+from .solvers import SOLVERS, floor_cost
+from .uncertainty import covariance
+
+MAX_ROUNDS = 6
+"""Rounds of fit-and-look-again before a fit whose identifiable set keeps changing stops."""
+
+NEGLIGIBLE_SE = 1e-9
+"""Standard errors (m or rad) below this are rounding: never a reason to hold a parameter."""
+
+PLAUSIBLE_DEVIATION = {"m": 5e-3, "rad": np.radians(1.0)}
+"""No joint or tool parameter of a real arm deviates more from a nominal worth its name.
+A wrong nominal (a length off by 100 mm) is found by a well-determined estimate, not
+ruled out by this; a standard error above it says the data know nothing of the parameter."""
+
+UNPRUNED_PREFIXES = ("base_", "point")
+"""Parameters without a meaningful nominal value (where the instrument stands, where a
+reflector sits): estimated whenever visible, never held for being close to the start."""
+
+LOSSES = ("linear", "huber", "soft_l1")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """How to solve each round (see `casecal.identify` for the meaning of each)."""
+
+    method: str
+    max_iterations: int
+    tolerance: float
+    known: bool
+    w: np.ndarray
+    loss: str = "linear"
+    loss_scale: float = 3.0
+    bounds: dict = field(default_factory=dict)
+    prior: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Where the rounds ended.
+
+    Attributes
+    ----------
+    robot : Robot
+        The fitted robot (fit frame).
+    estimated : tuple of str
+        In the canonical order of the asked-for names (as `Robot.position_jacobian` orders
+        its columns, so the covariance pairs with it).
+    pruned : dict of str to str
+        Parameters held at their start values because the data do not determine them,
+        with the reason.
+    unsupported : tuple of str
+        Those of `pruned` whose uncertainty alone would have moved the tool across the
+        workspace by more than the uncalibrated error: the poses do not support them.
+    frozen : dict of str to str
+        Parameters estimated in an earlier round that are blind where the fit ended,
+        held at the value they were fitted to while visible, with the reason.
+    iterations, solver_status : int
+    message : str or None
+    history : tuple of float
+        Cost after each iteration of every round.
+    weights : ndarray, shape (N, m)
+        Robust-loss weights of the measured points (ones for least squares).
+    start_analysis, end_analysis : Observability
+        At the start of the fit and where it ended.
+    start_robot : Robot
+        Where the fit started (fit frame).
+    rounds : int
+    settled : bool
+        Whether the estimated set stopped changing before `MAX_ROUNDS`.
+    joined : tuple of str
+        Parameters blind at the start that the later rounds estimated.
+    """
+
+    robot: Robot
+    estimated: tuple[str, ...]
+    pruned: dict
+    unsupported: tuple[str, ...]
+    frozen: dict
+    iterations: int
+    solver_status: int
+    message: str | None
+    history: tuple[float, ...]
+    weights: np.ndarray
+    start_analysis: Observability
+    end_analysis: Observability
+    start_robot: Robot
+    rounds: int
+    settled: bool
+    joined: tuple[str, ...]
+
+
+def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> Outcome:
+    """Fit `names` from `start` in rounds (module doc).
+
+    Parameters
+    ----------
+    make : callable(robot, names=...) -> Problem
+        Builds the problem of the measurements at a robot.
+    start : Robot
+        Start of the fit; parameters held for the noise keep its values.
+    names : sequence of str
+        The asked-for parameters.
+    settings : Settings
+    e0 : float
+        RMS position error at the start, m: the uncalibrated error that a parameter's
+        uncertainty must not exceed (never less than the noise, √3 σ RMS, when σ is known:
+        data that match the nominal robot to their noise bound no deviation below it).
+    """
+    if settings.known:
+        e0 = max(e0, float(np.sqrt(3 * np.mean(1.0 / settings.w**2))))
+    hold = start.parameters
+    start_analysis = check_analysis(make(start, names=names))
+    q_work = workspace_poses(start)
+    order = [names[i] for i in pivot_order(names) if names[i] in start_analysis.base_parameters]
+    point, weights = start, np.ones((start_analysis.n_poses, make(start, names=names).m))
+    iterations, history, pruned, frozen, seen = 0, [], {}, {}, []
+    end_analysis, settled = start_analysis, False
+    rounds = 0
+    for rounds in range(1, MAX_ROUNDS + 1):  # noqa: B007 (the count is reported)
+        point, its, status, hist, message, weights = _solve_round(
+            make, point, names, order, settings, weights, hold
+        )
+        iterations += its
+        history += hist if not history else hist[1:]
+        if settings.method == "svd" or status < 0:
+            # the paper's one linearisation: what it saw is what it saw at the start
+            settled = True
+            break
+        full = _problem(make, point, names, settings, weights)
+        J, r = full.jacobian(np.zeros(len(names))), full.residual(np.zeros(len(names)))
+        end_analysis = analyse(J, names, full.q.shape[0], prefer=order)
+        base = end_analysis.base_parameters
+        visible = [n for n in order if n in base]
+        visible += [
+            names[i]
+            for i in pivot_order(names)
+            if names[i] in base and names[i] not in order and names[i] not in pruned
+        ]
+        for n in order:
+            if n not in base:  # blind here: any value is as good, keep the fitted one
+                frozen[n] = FROZEN
+        J_work = workspace_jacobian(point, q_work, names, full)
+        keep, dropped = prune(
+            J, r, names, visible, settings.known, e0, J_work, _noise(full, settings)
+        )
+        pruned.update(dropped)
+        seen.append(frozenset(order))
+        if set(keep) == set(order):
+            settled = True
+            break
+        if frozenset(keep) in seen:
+            break
+        # noise-held parameters go back to their start values; blind ones keep theirs
+        point = point.with_parameters({n: hold[n] for n in dropped if n in order})
+        order = keep
+    return Outcome(
+        robot=point,
+        estimated=tuple(n for n in names if n in order),
+        pruned={n: why for n, why in pruned.items() if n not in order},
+        unsupported=tuple(n for n, why in pruned.items() if n not in order and WIDE in why),
+        frozen={n: why for n, why in frozen.items() if n not in order},
+        iterations=iterations,
+        solver_status=status,
+        message=message,
+        history=tuple(float(h) for h in history),
+        weights=weights,
+        start_analysis=start_analysis,
+        end_analysis=end_analysis,
+        start_robot=start,
+        rounds=rounds,
+        settled=settled,
+        joined=tuple(n for n in order if n not in start_analysis.base_parameters),
+    )
+
+
+FROZEN = "blind where the fit ended; held at the value it was fitted to while it was visible"
+
+FROZEN = "blind where the fit ended; held at the value it was fitted to while visible"
+
+WORKSPACE_POSES = 200
+
+
+def workspace_poses(robot: Robot):
+    """Poses spread within the joint limits (fixed seed), or None without limits."""
+    try:
+        return uniform(robot, WORKSPACE_POSES, seed=0)
+    except CalibrationError:
+        return None
+
+
+def _noise(full: Problem, settings: Settings) -> float:
+    """RMS noise of a measured point (m): from σ when known, else from the residuals."""
+    if settings.known:
+        return float(np.sqrt(3 * np.mean(1.0 / settings.w**2)))
+    n_points = full.q.shape[0] * full.m
+    return float(np.sqrt(np.sum(full.point_residuals(np.zeros(len(full.names))) ** 2) / n_points))
+
+
+def check_analysis(full: Problem) -> Observability:
+    """Identifiability at `full`'s robot, refusing data that cannot decide it."""
+    names = full.names
+    obs = analyse(full.jacobian(np.zeros(len(names))), names, full.q.shape[0])
+    n_poses, rows = full.q.shape[0], full.w_flat.size
+    if obs.rank >= rows and len(names) > obs.rank:
+        # the data, not the robot's structure, limit what can be seen
+        raise CalibrationError(
+            f"{n_poses} poses give {rows} coordinates, fewer than the "
+            f"{len(names)} parameters asked for, so they cannot tell which are blind; "
+            f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
+        )
+    if not obs.base_parameters:
+        raise CalibrationError(
+            f"none of the asked-for parameters ({', '.join(names)}) moves the measured point at "
+            "these poses; ask for others or measure other poses"
+        )
+    return obs
+
+
+def _problem(make, point, names, settings: Settings, weights) -> Problem:
+    problem = make(point, names=names)
+    return problem if settings.loss == "linear" else problem.reweighted(weights)
+
+
+def _solve_round(make, point, names, estimated, settings: Settings, weights, hold):
+    """One round: the solver (inside iteratively reweighted least squares for a robust
+    loss) on the `estimated` parameters from `point`."""
+    solver = SOLVERS[settings.method]
+    kwargs = {"max_iterations": settings.max_iterations, "tolerance": settings.tolerance}
+    if settings.method == "ipopt":
+        # bounds and prior are on deviations from nominal; x is from the current point
+        offset = {n: point.parameters[n] - hold[n] for n in estimated}
+        kwargs["bounds"] = {
+            n: (lo - offset[n], hi - offset[n])
+            for n, (lo, hi) in settings.bounds.items()
+            if n in estimated
+        }
+        kwargs["prior"] = {n: sd for n, sd in settings.prior.items() if n in estimated}
+        kwargs["prior_offset"] = np.array([offset[n] for n in estimated])
+    iterations, history = 0, []
+    for _ in range(1 if settings.loss == "linear" else 20):
+        problem = _problem(make, point, names, settings, weights).restricted(estimated)
+        x = np.zeros(len(estimated))
+        r = problem.residual(x)
+        if 0.5 * r @ r <= floor_cost(problem):  # nothing left to fit (a later round)
+            return point, iterations, 4, history or [0.5 * r @ r], None, weights
+        x, its, status, hist, message = solver(problem, x, **kwargs)
+        if settings.method == "gauss-newton" and status in (0, 3):
+            # stalled in a curved valley: Levenberg-Marquardt's damping goes on from here
+            x, more, status, tail, message = SOLVERS["lm"](problem, x, **kwargs)
+            its, hist = its + more, hist + tail[1:]
+        iterations += its
+        history += hist if not history else hist[1:]
+        point = point.with_deviations(dict(zip(estimated, x.tolist(), strict=True)))
+        if settings.loss == "linear" or status < 0:
+            break
+        residuals = make(point, names=names).point_residuals(np.zeros(len(names)))
+        e = np.linalg.norm(residuals * settings.w[:, None, :], axis=2)  # (N, m), σ units
+        c = settings.loss_scale * (1.0 if settings.known else _robust_sd(e))
+        new = _loss_weights(settings.loss, e, c)
+        if np.abs(new - weights).max() < 1e-6:
+            break
+        weights = new
+    return point, iterations, status, history, message, weights
+
+
+def _loss_weights(loss: str, e: np.ndarray, c: float) -> np.ndarray:
+    """IRLS weights of residual norms `e` for a robust loss of scale `c`."""
+    if loss == "huber":
+        return np.where(e <= c, 1.0, c / np.maximum(e, 1e-300))
+    return 1.0 / np.sqrt(1.0 + (e / c) ** 2)
+
+
+def _robust_sd(e: np.ndarray) -> float:
+    """Standard deviation of one coordinate from the median of point-residual norms.
+
+    For Gaussian noise the norm of a 3-vector has median ≈ 1.538 σ.
+    """
+    return float(np.median(e)) / 1.538 or 1e-12
+
+
+def prune(J, r, names, candidates, known: bool, e0: float, J_work, noise: float):
+    """The noise-aware rank: which of the structurally identifiable `candidates` to hold.
+
+    From the current point, the covariance C of the candidates' estimates is that of one
+    more Gauss-Newton step. What a candidate's uncertainty does to predictions is its
+    *spread*: the RMS displacement of the measured points, over poses spread across the
+    workspace (`J_work`), that its uncertainty adds given all the others, i.e. the drop
+    in the predicted variance ``mean |J_work C J_workᵀ|`` when it is held (exact for a
+    Gaussian: ``|J_work C e_j|² / C_jj``). Marginal standard errors would overstate it
+    for correlated parameters: coaxial joints know their sum well and only their
+    difference poorly. A candidate (other than the frames, `UNPRUNED_PREFIXES`) with a
+    standard error above `NEGLIGIBLE_SE` is held when
+
+    - its spread exceeds `e0`, the whole uncalibrated error: the paper's lockstep
+      schedule with few poses determines some lengths only to metres, and such an
+      estimate could only make the robot worse where it was not measured; or
+    - its standard error exceeds `PLAUSIBLE_DEVIATION` (5 mm, 1°) while its spread is
+      below the `noise`: a wrist angle seen through a tool point 0.2 mm off its axis is
+      known only to degrees and changes nothing a measurement could see.
+
+    Candidates are held one at a time and the others' covariance is conditioned exactly,
+    so correlated pairs lose one member, not both. Among those over a limit, the one
+    latest in `candidates` (given in seniority, then `pivot_order`) goes first, as in the
+    structural base set: the choice does not depend on the noise.
+
+    Parameters
+    ----------
+    J, r : ndarray
+        Weighted Jacobian (all `names`) and residual at the current point.
+    names, candidates : sequence of str
+    known : bool
+        Whether the weights are 1/σ.
+    e0 : float
+        Uncalibrated RMS error, m.
+    J_work : ndarray, shape (3 n, len(names))
+        Unweighted Jacobian of n measured points at workspace poses, m per unit.
+    noise : float
+        RMS noise of a measured point, m (0 when the residuals show none).
+
+    Returns
+    -------
+    keep : list of str
+    dropped : dict of str to str
+        Each held candidate with the reason, in words and units.
+    """
+    if not candidates:
+        return [], {}
+    idx = [names.index(n) for n in candidates]
+    Jc = J[:, idx]
+    step, _ = gauss_newton_step(Jc, r)
+    C = covariance(Jc, r - Jc @ step, known)
+    W = J_work[:, idx]
+    n_points = W.shape[0] / 3
+    free = np.array([not n.startswith(UNPRUNED_PREFIXES) for n in candidates])
+    plausible = np.array([PLAUSIBLE_DEVIATION[unit(n)] for n in candidates])
+    active = list(range(len(idx)))
+    dropped = {}
+    while active:
+        a = np.array(active)
+        Ca = C[np.ix_(a, a)]
+        var = np.clip(np.diag(Ca), 0.0, None)
+        se = np.sqrt(var)
+        explained = np.sum((W[:, a] @ Ca) ** 2, axis=0) / np.where(var > 0, var, np.inf)
+        spread = np.sqrt(explained / n_points)  # m, RMS over the workspace points
+        too_wide = spread > e0
+        useless = (se > plausible[a]) & (spread <= noise)
+        bad = free[a] & (se > NEGLIGIBLE_SE) & (too_wide | useless)
+        if not bad.any():
+            break
+        pos = int(np.flatnonzero(bad)[-1])
+        j = int(a[pos])
+        dropped[candidates[j]] = _reason(candidates[j], se[pos], spread[pos], e0, too_wide[pos])
+        c = C[:, j].copy()
+        C = C - np.outer(c, c) / C[j, j]
+        active.remove(j)
+    return [candidates[k] for k in active], dropped
+
+
+def workspace_jacobian(point: Robot, q_work, names, full: Problem) -> np.ndarray:
+    """Unweighted Jacobian of the measured points at workspace poses, (3 n, k), m/unit.
+
+    At `q_work` (poses spread within the joint limits) when there are any, else at the
+    measured poses.
+    """
+    if q_work is None:
+        n, rows = full.w_rows.shape
+        point_rows = 3 * full.m
+        J = full.jacobian(np.zeros(len(names))).reshape(n, rows, -1)
+        return (J[:, :point_rows, :] / full.w_rows[:, :point_rows, None]).reshape(-1, len(names))
+    chain = full.chain
+    J = chain.evaluate("points_jacobian", q_work, point.vector(), full.kernel_columns)
+    return J.reshape(-1, J.shape[-1])[:, full.take]
+
+
+WIDE = "more than the whole uncalibrated error"
+
+
+def _reason(name: str, se: float, spread: float, e0: float, too_wide: bool) -> str:
+    scale, u = (1e3, "mm") if unit(name) == "m" else (180 / np.pi, "°")
+    text = f"its standard error would be {se * scale:.3g} {u}"
+    if too_wide:
+        return (
+            text + f", moving the tool by {spread * 1e3:.3g} mm RMS on poses across the "
+            f"workspace, {WIDE} ({e0 * 1e3:.3g} mm)"
+        )
+    limit = PLAUSIBLE_DEVIATION[unit(name)] * scale
+    return (
+        text + f", more than any real deviation ({limit:g} {u}), while it moves the tool by "
+        f"only {spread * 1e3:.3g} mm RMS, below the noise"
+    )
