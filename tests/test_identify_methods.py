@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -10,13 +12,16 @@ import casecal as cc
 DH = ["theta*", "d*", "a*", "alpha*"]
 
 
-def puma_problem(n=60, seed=0):
+def puma_problem(n=60, seed=0, tool=None):
     """PUMA with random deviations on every DH parameter the poses can identify.
 
     Parameters in blind groups get none: a held parameter's true deviation would be
     absorbed by its group only to first order, and the rest would leak into the others.
+    `tool`: a measured point on the tool (m), instead of the flange's centre.
     """
     robot = cc.load_robot("puma560")
+    if tool is not None:
+        robot = dataclasses.replace(robot, tool=cc.Frame(tool), auto_beta=False)
     rng = np.random.default_rng(seed)
     q = cc.poses.uniform(robot, n, seed=seed)
     visible = cc.observability(robot, q, DH).identifiable
@@ -62,7 +67,8 @@ def test_standard_errors_match_monte_carlo_spread():
 
 def test_unknown_sigma_uses_residual_scale():
     sigma = 0.03e-3
-    robot, _, q, true = puma_problem(n=80, seed=2)
+    # a tool point well off the wrist: every wrist angle is seen, nothing is held
+    robot, _, q, true = puma_problem(n=80, seed=2, tool=(0.05, 0.02, 0.1))
     noisy = cc.simulate(true, q, noise=sigma, seed=5)
     known = cc.identify(robot, noisy, DH, "gauss-newton")
     unknown = cc.identify(robot, noisy, DH, "gauss-newton", noise=0.0)

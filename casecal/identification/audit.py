@@ -17,6 +17,11 @@ failure with its reason:
   be held because its uncertainty alone would exceed that error (what the other
   estimates absorbed of it then holds only on poses like the measured ones): poses that
   cannot support the parameters make the robot worse elsewhere, and say so here;
+- **held parameters do not matter**: freeing the parameters held because the data did not
+  determine them would lower the cost by no more than chance allows (the 99.9 % quantile
+  of χ² with one degree of freedom per parameter, in noise variances or, without σ,
+  residual variances): otherwise the data do see them, and what looked like noise is a
+  parameter missing from the fit;
 - **identifiable set settled**: the rounds of `casecal.identification.rounds` stopped
   changing which parameters they estimate.
 """
@@ -121,6 +126,8 @@ class Facts:
     n_points: int = 1
     one_shot: bool = False
     unsupported: tuple[str, ...] = ()
+    held_gain: float = 0.0
+    held: tuple[str, ...] = ()
     prediction_note: str = ""
 
 
@@ -132,6 +139,7 @@ def audit(f: Facts) -> Audit:
             _no_growth(f),
             _noise(f),
             _prediction(f),
+            _held(f),
             Check(
                 "identifiable set settled",
                 f.settled,
@@ -204,6 +212,26 @@ def _noise(f: Facts) -> Check:
             f", more than any position instrument's noise ({PLAUSIBLE_NOISE * 1e3:g} mm): "
             "the model does not fit; if your instrument really is that noisy, state its σ "
             "(--noise, or a sigma_mm column) and the fit is judged against it"
+        )
+    return Check(name, ok, text)
+
+
+def _held(f: Facts) -> Check:
+    name = "held parameters do not matter"
+    if not f.held:
+        return Check(name, None, "none held for the noise")
+    scale = 1.0 if f.known else (2.0 * f.cost_final / f.dof if f.dof > 0 else 1.0)
+    gain = 2.0 * f.held_gain / scale if scale > 0 else 0.0  # a χ² statistic
+    bound = scipy.stats.chi2.ppf(CHI2_LEVEL, len(f.held))
+    ok = gain <= bound or f.cost_final <= f.floor
+    text = (
+        f"freeing {', '.join(f.held)} would lower the cost by {gain / 2:.3g} "
+        f"{'noise' if f.known else 'residual'} variances (chance: up to {bound / 2:.3g})"
+    )
+    if not ok:
+        text += (
+            ": the data do see them; the residuals are a missing parameter, not noise "
+            "(state the measurement σ, or measure better-spread poses)"
         )
     return Check(name, ok, text)
 

@@ -19,10 +19,12 @@ from ..data.files import _numbers, read_joints, read_table
 from ..design.poses import rng_from
 from ..errors import CalibrationError
 from ..model.robot import Robot, check_joint_values
-from .analysis import analyse, selection
-from .calibration import STATUS_MESSAGES, Calibration
-from .fit import METHODS
-from .solvers import SOLVERS
+from .analysis import analyse, represent, selection
+from .audit import Facts, audit
+from .calibration import Calibration
+from .fit import METHODS, verdict
+from .linalg import gauss_newton_step
+from .solvers import ROUNDING, SOLVERS, floor_cost
 from .uncertainty import uncertainty
 
 
@@ -226,10 +228,33 @@ def identify_distances(
         problem, np.zeros(len(estimated)), max_iterations=max_iterations, tolerance=tolerance
     )
     calibrated = problem._robot(x)
-    r = problem.residual(x)
-    cov, se = uncertainty(problem.jacobian(x), r, known, names, estimated)
+    r, J = problem.residual(x), problem.jacobian(x)
+    r0 = full.residual(np.zeros(len(names)))
+    cov, se = uncertainty(J, r, known, names, estimated)
     deviations = dict.fromkeys(names, 0.0)
     deviations.update(zip(estimated, x.tolist(), strict=True))
+    checks = audit(
+        Facts(
+            solver_status=status,
+            solver_message=message,
+            cost_start=0.5 * float(r0 @ r0),
+            cost_final=0.5 * float(r @ r),
+            floor=floor_cost(problem, ROUNDING),
+            predicted_decrease=gauss_newton_step(J, r)[1],
+            known=known,
+            dof=r.size - len(estimated),
+            rms_start=float(np.sqrt(np.mean((r0 / w) ** 2))),
+            rms_final=float(np.sqrt(np.mean((r / w) ** 2))),
+            settled=True,
+            rounds=1,
+            predicted_rms=None,
+            prediction_note="distances: no frame in which to predict positions",
+            one_shot=method == "svd",
+            n_points=r.size,
+        )
+    )
+    solver_status = status
+    status, message = verdict(checks, solver_status, message)
     cal = Calibration(
         method=method,
         nominal=robot,
@@ -240,13 +265,16 @@ def identify_distances(
         standard_errors=se,
         covariance=cov,
         residuals=(r / w)[:, None],
-        residuals_before=full.residual(np.zeros(len(names)))[:, None] / w[:, None],
+        residuals_before=(r0 / w)[:, None],
         iterations=iterations,
         status=status,
-        message=message or STATUS_MESSAGES[status],
+        message=message,
         history=tuple(float(h) for h in history),
         observability=obs,
         sigma_known=known,
         wall_time=time.perf_counter() - t0,
+        audit=checks,
+        solver_status=solver_status,
+        representation=represent(full.jacobian(np.zeros(len(names))), names, estimated),
     )
     return cal.compare_to(truth) if truth is not None else cal

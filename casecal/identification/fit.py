@@ -196,9 +196,11 @@ def identify(
         n_points=point_residuals.size // 3,
         one_shot=method == "svd",
         unsupported=out.unsupported,
+        held=tuple(out.pruned),
+        held_gain=_gain_of_freeing(final, out, names, J, r),
     )
     checks = audit(facts)
-    status, message = _status(out, checks)
+    status, message = verdict(checks, out.solver_status, out.message)
 
     calibrated = frame.robot_out(out.robot)
     cov = frame.covariance_out(cov, out.estimated, out.robot)
@@ -259,6 +261,16 @@ def _representation(calibrated, final, frame, make_world, names, out):
     return represent(final.jacobian(np.zeros(len(names))), names, out.estimated)
 
 
+def _gain_of_freeing(final: Problem, out, names, J, r) -> float:
+    """Cost decrease (one linearised step) that freeing the noise-held parameters would
+    add to what the estimated ones can still gain."""
+    if not out.pruned:
+        return 0.0
+    both = [n for n in names if n in out.estimated or n in out.pruned]
+    wide = final.restricted(both).jacobian(np.zeros(len(both)))
+    return gauss_newton_step(wide, r)[1] - gauss_newton_step(J, r)[1]
+
+
 def _blind_only_here(final: Problem, out, names) -> tuple[str, ...]:
     """Held parameters (blind here) that poses across the joint ranges would show."""
     q_work = workspace_poses(out.robot)
@@ -284,14 +296,14 @@ def _still_joints(q: np.ndarray, robot: Robot) -> tuple[str, ...]:
     return tuple(still)
 
 
-def _status(out, checks) -> tuple[int, str]:
-    """The Calibration's status and message: the audit's verdict over the solver's."""
+def verdict(checks, solver_status: int, solver_message: str | None) -> tuple[int, str]:
+    """A Calibration's status and message: the audit's verdict over the solver's."""
     if not checks.passed:
         first, *more = checks.failures
         also = f" (also failed: {', '.join(c.name for c in more)})" if more else ""
         return -2, f"failed the answer audit: {first.name}: {first.text}{also}"
-    if out.solver_status > 0:
-        return out.solver_status, out.message or STATUS_MESSAGES[out.solver_status]
+    if solver_status > 0:
+        return solver_status, solver_message or STATUS_MESSAGES[solver_status]
     return 6, STATUS_MESSAGES[6]
 
 

@@ -42,14 +42,26 @@ def triangular(J: np.ndarray, r: np.ndarray | None = None):
     return Ra[:k, :k], Ra[:k, k]
 
 
+ZERO_COLUMN = 1e-8
+"""A column below this fraction of the largest one is zero: scaling it to unit norm would
+turn the rounding it holds (a wrist angle seen through a lever of 1e-17 m) into a full
+direction and a step of degrees. The rank tolerance of the analysis, for the same reason."""
+
+
+def column_scales(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Column norms of `J` to scale by, and which columns count as zero (`ZERO_COLUMN`)."""
+    norms = np.linalg.norm(J, axis=0)
+    zero = norms <= ZERO_COLUMN * max(norms.max(initial=0.0), np.finfo(float).tiny)
+    return np.where(zero, 1.0, norms), zero
+
+
 def svd_solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     """``x = D V S⁺ Uᵀ r`` for the column-scaled ``J D``: the paper's SVD least squares.
 
     Computed on the R factor of ``J D`` (`triangular`): the same singular values and V.
     """
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    R, Qtr = triangular(J / norms, r)
+    norms, zero = column_scales(J)
+    R, Qtr = triangular(np.where(zero, 0.0, J / norms), r)
     U, s, Vt = np.linalg.svd(R, full_matrices=False)
     keep = s > nr_threshold(s, J.shape)
     z = Vt[keep].T @ ((U[:, keep].T @ Qtr) / s[keep])
@@ -67,9 +79,8 @@ def gauss_newton_step(J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float]:
         ``0.5 |r|² - 0.5 |r - J step|²`` of the linear model: what one more step could
         still gain. Zero at a minimum; the convergence and optimality tests use it.
     """
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    R, Qtr = triangular(J / norms, r)
+    norms, zero = column_scales(J)
+    R, Qtr = triangular(np.where(zero, 0.0, J / norms), r)
     U, s, Vt = np.linalg.svd(R, full_matrices=False)
     keep = s > nr_threshold(s, J.shape)
     proj = U[:, keep].T @ Qtr

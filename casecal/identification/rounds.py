@@ -14,10 +14,13 @@ to within metres is no estimate at all. So a fit runs in rounds:
    *noise-aware rank*, `prune`);
 3. repeat until the set no longer changes (at most `MAX_ROUNDS`).
 
-Parameters held for the noise go back to their start values (nominal, in the fit frame),
-never to a value some intermediate fit guessed. One that was estimated in an earlier round
-and is blind where the fit ended keeps the value it was fitted to while visible: any value
-fits as well there, and resetting it would only be compensated to first order. Gauss-Newton
+When the noise-aware rank holds a parameter, the next round starts over from the start
+(every held parameter at its start value, nominal in the fit frame): what was fitted
+beside a parameter the data cannot determine may carry its wild values. A parameter that
+was estimated in an earlier round and is only structurally blind where the fit ended goes
+back to its start value when that changes nothing measured, and otherwise keeps the value
+it was fitted to while visible: any value fits as well there, and resetting it would only
+be compensated to first order. Gauss-Newton
 that stalls in a curved valley is continued by Levenberg-Marquardt within the round. The
 one-shot ``"svd"`` method is the paper's procedure and runs a single round without pruning.
 """
@@ -44,10 +47,11 @@ MAX_ROUNDS = 6
 NEGLIGIBLE_SE = 1e-9
 """Standard errors (m or rad) below this are rounding: never a reason to hold a parameter."""
 
-PLAUSIBLE_DEVIATION = {"m": 5e-3, "rad": np.radians(1.0)}
-"""No joint or tool parameter of a real arm deviates more from a nominal worth its name.
-A wrong nominal (a length off by 100 mm) is found by a well-determined estimate, not
-ruled out by this; a standard error above it says the data know nothing of the parameter."""
+PLAUSIBLE_DEVIATION = {"m": 2.5e-3, "rad": np.radians(0.5)}
+"""Deviations of a joint or tool parameter larger than this are not expected of a real arm
+(a nominal wrong by more, a length off by 100 mm, is found by a well-determined estimate,
+not ruled out by this). Holding a parameter rather than estimating it is the better bet
+when its standard error exceeds its deviation; past this bound it exceeds any."""
 
 UNPRUNED_PREFIXES = ("base_", "point")
 """Parameters without a meaningful nominal value (where the instrument stands, where a
@@ -173,22 +177,30 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
             for i in pivot_order(names)
             if names[i] in base and names[i] not in order and names[i] not in pruned
         ]
-        for n in order:
-            if n not in base:  # blind here: any value is as good, keep the fitted one
-                frozen[n] = FROZEN
+        point, lost = _release(make, point, names, settings, weights, hold, order, base, r)
+        frozen.update(dict.fromkeys(lost, FROZEN))
         J_work = workspace_jacobian(point, q_work, names, full)
-        keep, dropped = prune(
-            J, r, names, visible, settings.known, e0, J_work, _noise(full, settings)
-        )
+        noise = float(np.sqrt(3 * np.mean(1.0 / settings.w**2))) if settings.known else None
+        # without σ, residuals and standard errors still hold what a newcomer may explain
+        fresh = frozenset() if settings.known else frozenset(visible) - set(order)
+        keep, dropped = prune(J, r, names, visible, settings.known, e0, J_work, noise, fresh)
         pruned.update(dropped)
         seen.append(frozenset(order))
-        if set(keep) == set(order):
+        dropped = [n for n in dropped if n in order]  # newcomers held at once were never fitted
+        if set(keep) <= set(order) and not dropped:
+            # nothing joined and nothing was held for the noise: what left is blind here
+            # and keeps its fitted value, and a minimum over the larger set is one over
+            # the rest with it fixed, so the fit has settled where it stands
+            order = keep
             settled = True
             break
         if frozenset(keep) in seen:
             break
-        # noise-held parameters go back to their start values; blind ones keep theirs
-        point = point.with_parameters({n: hold[n] for n in dropped if n in order})
+        if dropped:
+            # what was fitted beside a parameter the data cannot determine may carry its
+            # wild values: start over, with every held parameter at its start value
+            point = start
+            frozen = {}
         order = keep
     return Outcome(
         robot=point,
@@ -217,20 +229,27 @@ FROZEN = "blind where the fit ended; held at the value it was fitted to while vi
 WORKSPACE_POSES = 200
 
 
+def _release(make, point, names, settings, weights, hold, order, base, r):
+    """Parameters estimated so far that are blind where the fit ended: back to their start
+    values when that costs nothing (a wrist angle about which the tool point turns in
+    place), else kept at their fitted values (returned as `lost`, to be reported)."""
+    blind = [n for n in order if n not in base]
+    if not blind:
+        return point, []
+    reset = point.with_parameters({n: hold[n] for n in blind})
+    problem = _problem(make, reset, names, settings, weights)
+    r_reset = problem.residual(np.zeros(len(names)))
+    if r_reset @ r_reset <= (r @ r) * (1 + 1e-9) + 2 * floor_cost(problem):
+        return reset, []
+    return point, blind
+
+
 def workspace_poses(robot: Robot):
     """Poses spread within the joint limits (fixed seed), or None without limits."""
     try:
         return uniform(robot, WORKSPACE_POSES, seed=0)
     except CalibrationError:
         return None
-
-
-def _noise(full: Problem, settings: Settings) -> float:
-    """RMS noise of a measured point (m): from σ when known, else from the residuals."""
-    if settings.known:
-        return float(np.sqrt(3 * np.mean(1.0 / settings.w**2)))
-    n_points = full.q.shape[0] * full.m
-    return float(np.sqrt(np.sum(full.point_residuals(np.zeros(len(full.names))) ** 2) / n_points))
 
 
 def check_analysis(full: Problem) -> Observability:
@@ -315,7 +334,7 @@ def _robust_sd(e: np.ndarray) -> float:
     return float(np.median(e)) / 1.538 or 1e-12
 
 
-def prune(J, r, names, candidates, known: bool, e0: float, J_work, noise: float):
+def prune(J, r, names, candidates, known, e0, J_work, noise, fresh=frozenset()):
     """The noise-aware rank: which of the structurally identifiable `candidates` to hold.
 
     From the current point, the covariance C of the candidates' estimates is that of one
@@ -331,9 +350,11 @@ def prune(J, r, names, candidates, known: bool, e0: float, J_work, noise: float)
     - its spread exceeds `e0`, the whole uncalibrated error: the paper's lockstep
       schedule with few poses determines some lengths only to metres, and such an
       estimate could only make the robot worse where it was not measured; or
-    - its standard error exceeds `PLAUSIBLE_DEVIATION` (5 mm, 1°) while its spread is
-      below the `noise`: a wrist angle seen through a tool point 0.2 mm off its axis is
-      known only to degrees and changes nothing a measurement could see.
+    - its standard error exceeds `PLAUSIBLE_DEVIATION` (2.5 mm, 0.5°) while its spread is
+      below half the `noise`: a wrist angle seen through a tool point 0.3 mm off its axis
+      is known only to degrees and changes nothing a measurement could see, while its
+      correlations blur the estimates beside it. (The bias holding it leaves is then at
+      most its spread, so a few such parameters together stay within the noise.)
 
     Candidates are held one at a time and the others' covariance is conditioned exactly,
     so correlated pairs lose one member, not both. Among those over a limit, the one
@@ -351,8 +372,13 @@ def prune(J, r, names, candidates, known: bool, e0: float, J_work, noise: float)
         Uncalibrated RMS error, m.
     J_work : ndarray, shape (3 n, len(names))
         Unweighted Jacobian of n measured points at workspace poses, m per unit.
-    noise : float
-        RMS noise of a measured point, m (0 when the residuals show none).
+    noise : float or None
+        RMS noise of a measured point, m; None when no σ is stated: then it is taken from
+        what the candidates would leave after one more step.
+    fresh : set of str
+        Candidates not to hold for moving nothing measurable yet: without a stated σ, those
+        no round has fitted, since until then the residual (and the standard errors taken
+        from it) still holds what they may explain.
 
     Returns
     -------
@@ -366,10 +392,14 @@ def prune(J, r, names, candidates, known: bool, e0: float, J_work, noise: float)
     Jc = J[:, idx]
     step, _ = gauss_newton_step(Jc, r)
     C = covariance(Jc, r - Jc @ step, known)
+    if noise is None:  # unweighted residuals, m: per-coordinate RMS, times √3 per point
+        rest = r - Jc @ step
+        noise = float(np.sqrt(3 * np.mean(rest**2)))
     W = J_work[:, idx]
     n_points = W.shape[0] / 3
     free = np.array([not n.startswith(UNPRUNED_PREFIXES) for n in candidates])
     plausible = np.array([PLAUSIBLE_DEVIATION[unit(n)] for n in candidates])
+    untried = np.array([n in fresh for n in candidates])
     active = list(range(len(idx)))
     dropped = {}
     while active:
@@ -380,7 +410,7 @@ def prune(J, r, names, candidates, known: bool, e0: float, J_work, noise: float)
         explained = np.sum((W[:, a] @ Ca) ** 2, axis=0) / np.where(var > 0, var, np.inf)
         spread = np.sqrt(explained / n_points)  # m, RMS over the workspace points
         too_wide = spread > e0
-        useless = (se > plausible[a]) & (spread <= noise)
+        useless = (se > plausible[a]) & (spread <= 0.5 * noise) & ~untried[a]
         bad = free[a] & (se > NEGLIGIBLE_SE) & (too_wide | useless)
         if not bad.any():
             break

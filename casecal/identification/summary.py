@@ -118,10 +118,11 @@ def _notes(cal: Calibration) -> list[str]:
     if cal.start_note:
         notes.append(cal.start_note)
     if cal.joined:
+        one = len(cal.joined) == 1
         notes.append(
-            f"{_names(cal.joined)} moved nothing measured where the fit started but do where "
-            "it ended (a tool point off the axes it started on, for instance); later rounds "
-            "estimated them."
+            f"{_names(cal.joined)} moved nothing measured where the fit started but "
+            f"{'does' if one else 'do'} where it ended (a tool point off the axes it started "
+            f"on, for instance); a later round estimated {'it' if one else 'them'}."
         )
     notes += _held_notes(cal)
     if cal.pose_blind:
