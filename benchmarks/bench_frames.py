@@ -2,7 +2,8 @@
 
 Positions in a far instrument frame (2.9 m off, turned 130°) of a tool 0.12 m past the
 flange, small DH deviations, 0.02 mm noise. casecal's ``identify(..., "all", "gauss-newton")``
-(rigid-fit base, frames pre-fit, identifiability analysis, Gauss-Newton, standard errors) is
+(rigid-fit frame, identifiability analysis in rounds, Gauss-Newton, the audit, standard
+errors) is
 timed beside a plain numpy reference in the same run (the machine is shared): Kabsch rigid fit
 (one 3 × 3 SVD) for the starting base, then Gauss-Newton with analytic Jacobian columns,
 column scaling, lstsq and full steps, on casecal's estimated set minus Hayati's beta2 (held
@@ -97,6 +98,8 @@ def numpy_identify(p_start, idx, q, y, tol=1e-10, max_iter=50):
         f, J = numpy_chain(pi, q)
         J = J[:, :, idx].reshape(-1, len(idx))
         norms = np.linalg.norm(J, axis=0)
+        # at the nominal start the tool point is the wrist centre: wrist columns are zero
+        norms = np.where(norms > 1e-8 * norms.max(), norms, 1.0)
         z = np.linalg.lstsq(J / norms, (y - f).ravel(), rcond=None)[0]  # scaled step
         x = x + z / norms
         if np.linalg.norm(z) <= tol * (np.linalg.norm(x * norms) + tol):

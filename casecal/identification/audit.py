@@ -11,17 +11,19 @@ failure with its reason:
 - **residual did not grow**: the fit is no worse than where it started;
 - **residual consistent with the noise**: with a stated σ, the reduced χ² is within the
   99.9 % bound of chance, allowing σ to be 10 % low; without one, the RMS residual is
-  within what any position instrument's noise explains (`PLAUSIBLE_NOISE`);
+  within what any position instrument's noise explains (`PLAUSIBLE_NOISE`); either way,
+  the residuals are not smooth in the joint values (`smoothness`): noise differs from one
+  pose to the next, a model error does not;
 - **prediction**: the error the covariance predicts on new poses within the joint limits
   is not larger than the error the robot had before calibration, and no parameter had to
   be held because its uncertainty alone would exceed that error (what the other
   estimates absorbed of it then holds only on poses like the measured ones): poses that
   cannot support the parameters make the robot worse elsewhere, and say so here;
 - **held parameters do not matter**: freeing the parameters held because the data did not
-  determine them would lower the cost by no more than chance allows (the 99.9 % quantile
-  of χ² with one degree of freedom per parameter, in noise variances or, without σ,
-  residual variances): otherwise the data do see them, and what looked like noise is a
-  parameter missing from the fit;
+  determine them would lower the cost by no more than chance allows (a χ² quantile,
+  `casecal.identification.rank.held_matter`, in noise variances or, without σ, residual
+  variances): otherwise the data do see them, and what looked like noise is a parameter
+  missing from the fit;
 - **identifiable set settled**: the rounds of `casecal.identification.rounds` stopped
   changing which parameters they estimate.
 """
@@ -37,6 +39,7 @@ from ..design.poses import uniform
 from ..errors import CalibrationError
 from ..model import kinematics
 from ..model.robot import Robot
+from .rank import held_matter
 
 OPTIMALITY = 0.05
 """Largest cost decrease one more step may still promise, in noise variances: the fit is
@@ -59,6 +62,11 @@ RESOLUTION = 1e-6
 error counts as converged when no σ is stated: below a laser tracker's resolution."""
 
 PREDICTION_POSES = 200
+
+SMOOTH = 0.5
+"""Below this `smoothness`, the residuals of neighbouring poses are too alike for noise."""
+
+SMOOTHNESS_POSES = 2000
 
 
 @dataclass(frozen=True)
@@ -128,6 +136,7 @@ class Facts:
     unsupported: tuple[str, ...] = ()
     held_gain: float = 0.0
     held: tuple[str, ...] = ()
+    smoothness: float | None = None
     prediction_note: str = ""
 
 
@@ -204,16 +213,59 @@ def _noise(f: Facts) -> Check:
                 ": the model does not fit these data to their noise (a parameter missing "
                 "from the set, a wrong frame, outliers, or a σ that is too small)"
             )
-        return Check(name, ok, text)
-    ok = f.rms_final <= PLAUSIBLE_NOISE
-    text = f"no σ stated; RMS residual {f.rms_final * 1e3:.4g} mm"
-    if not ok:
-        text += (
-            f", more than any position instrument's noise ({PLAUSIBLE_NOISE * 1e3:g} mm): "
-            "the model does not fit; if your instrument really is that noisy, state its σ "
-            "(--noise, or a sigma_mm column) and the fit is judged against it"
-        )
+    else:
+        ok = f.rms_final <= PLAUSIBLE_NOISE
+        text = f"no σ stated; RMS residual {f.rms_final * 1e3:.4g} mm"
+        if not ok:
+            text += (
+                f", more than any position instrument's noise ({PLAUSIBLE_NOISE * 1e3:g} mm): "
+                "the model does not fit; if your instrument really is that noisy, state its "
+                "σ (--noise, or a sigma_mm column) and the fit is judged against it"
+            )
+    at_floor = f.cost_final <= f.floor or (f.one_shot and f.rms_final <= RESOLUTION)
+    if f.smoothness is not None and not at_floor:
+        smooth = f.smoothness < SMOOTH
+        text += f"; neighbouring poses' residuals differ {f.smoothness:.2f}× as much as noise's"
+        if smooth:
+            ok = False
+            text += (
+                " would: the residuals change smoothly with the joint values, a model error "
+                "(a parameter missing or held, a fit stuck short of the minimum), not noise"
+            )
     return Check(name, ok, text)
+
+
+def smoothness(q: np.ndarray, residuals: np.ndarray, seed: int = 0) -> float | None:
+    """How much the residuals of neighbouring poses differ, relative to independent noise.
+
+    For each pose, the nearest other pose in joint space (joints scaled to the range they
+    span in the data); the mean squared difference of their residual vectors over twice
+    the mean squared residual. About 1 for noise, which is independent from pose to pose;
+    near 0 for a model error, which changes smoothly with the joint values. None for fewer
+    than 12 poses. At most `SMOOTHNESS_POSES` poses (a fixed random subset) are compared.
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, dof)
+    residuals : ndarray, shape (N, ...)
+        Each pose's residuals, any units.
+    """
+    n = q.shape[0]
+    if n < 12:
+        return None
+    r = residuals.reshape(n, -1)
+    if n > SMOOTHNESS_POSES:
+        keep = np.random.default_rng(seed).choice(n, SMOOTHNESS_POSES, replace=False)
+        q, r, n = q[keep], r[keep], SMOOTHNESS_POSES
+    span = np.ptp(q, axis=0)
+    z = (q - q.min(axis=0)) / np.where(span > 0, span, 1.0)
+    d = np.sum((z[:, None, :] - z[None, :, :]) ** 2, axis=2)
+    np.fill_diagonal(d, np.inf)
+    nearest = np.argmin(d, axis=1)
+    total = 2.0 * np.mean(np.sum(r**2, axis=1))
+    if total == 0:
+        return None
+    return float(np.mean(np.sum((r - r[nearest]) ** 2, axis=1)) / total)
 
 
 def _held(f: Facts) -> Check:
@@ -221,9 +273,8 @@ def _held(f: Facts) -> Check:
     if not f.held:
         return Check(name, None, "none held for the noise")
     scale = 1.0 if f.known else (2.0 * f.cost_final / f.dof if f.dof > 0 else 1.0)
-    gain = 2.0 * f.held_gain / scale if scale > 0 else 0.0  # a χ² statistic
-    bound = scipy.stats.chi2.ppf(CHI2_LEVEL, len(f.held))
-    ok = gain <= bound or f.cost_final <= f.floor
+    matter, gain, bound = held_matter(f.held_gain, len(f.held), scale)
+    ok = not matter or f.cost_final <= f.floor
     text = (
         f"freeing {', '.join(f.held)} would lower the cost by {gain / 2:.3g} "
         f"{'noise' if f.known else 'residual'} variances (chance: up to {bound / 2:.3g})"

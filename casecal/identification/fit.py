@@ -31,10 +31,11 @@ from ..data.measurements import Measurements, broadcast_sigma
 from ..errors import CalibrationError
 from ..model.robot import Robot
 from .analysis import analyse, represent, selection
-from .audit import Facts, audit, predicted_rms
+from .audit import Facts, audit, predicted_rms, smoothness
 from .calibration import STATUS_MESSAGES, Calibration
 from .linalg import gauss_newton_step
 from .problem import Problem
+from .rank import held_gain
 from .rounds import LOSSES, Settings, fit_in_rounds, workspace_jacobian, workspace_poses
 from .solvers import ROUNDING, SOLVERS, floor_cost
 from .start import choose_frame, partial_base_start
@@ -178,6 +179,7 @@ def identify(
     prior_w = np.array([1.0 / prior[n] if n in prior else 0.0 for n in out.estimated])
     cov, _ = uncertainty(J, r, known, names, out.estimated, prior_w)
     r_start = at_start.residual(np.zeros(len(names)))
+    r_all = final.residual(np.zeros(len(names)))
     point_residuals = est.point_residuals(x0)
     facts = Facts(
         solver_status=out.solver_status,
@@ -197,7 +199,12 @@ def identify(
         one_shot=method == "svd",
         unsupported=out.unsupported,
         held=tuple(out.pruned),
-        held_gain=_gain_of_freeing(final, out, names, J, r),
+        smoothness=smoothness(q, point_residuals),
+        held_gain=held_gain(
+            final.jacobian(np.zeros(len(names))), r_all, names, out.estimated, out.pruned
+        )
+        if out.pruned
+        else 0.0,
     )
     checks = audit(facts)
     status, message = verdict(checks, out.solver_status, out.message)
@@ -259,16 +266,6 @@ def _representation(calibrated, final, frame, make_world, names, out):
     if out.end_analysis is out.start_analysis:  # one-shot: what it saw where it linearised
         final = make_world(frame.robot_out(out.start_robot), names=names)
     return represent(final.jacobian(np.zeros(len(names))), names, out.estimated)
-
-
-def _gain_of_freeing(final: Problem, out, names, J, r) -> float:
-    """Cost decrease (one linearised step) that freeing the noise-held parameters would
-    add to what the estimated ones can still gain."""
-    if not out.pruned:
-        return 0.0
-    both = [n for n in names if n in out.estimated or n in out.pruned]
-    wide = final.restricted(both).jacobian(np.zeros(len(both)))
-    return gauss_newton_step(wide, r)[1] - gauss_newton_step(J, r)[1]
 
 
 def _blind_only_here(final: Problem, out, names) -> tuple[str, ...]:

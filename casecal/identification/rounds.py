@@ -33,29 +33,14 @@ import numpy as np
 
 from ..design.poses import uniform
 from ..errors import CalibrationError
-from ..model.parameters import unit
 from ..model.robot import Robot
 from .analysis import Observability, analyse, pivot_order
-from .linalg import gauss_newton_step
 from .problem import Problem
+from .rank import WIDE, held_gain, held_matter, prune
 from .solvers import SOLVERS, floor_cost
-from .uncertainty import covariance
 
 MAX_ROUNDS = 6
 """Rounds of fit-and-look-again before a fit whose identifiable set keeps changing stops."""
-
-NEGLIGIBLE_SE = 1e-9
-"""Standard errors (m or rad) below this are rounding: never a reason to hold a parameter."""
-
-PLAUSIBLE_DEVIATION = {"m": 2.5e-3, "rad": np.radians(0.5)}
-"""Deviations of a joint or tool parameter larger than this are not expected of a real arm
-(a nominal wrong by more, a length off by 100 mm, is found by a well-determined estimate,
-not ruled out by this). Holding a parameter rather than estimating it is the better bet
-when its standard error exceeds its deviation; past this bound it exceeds any."""
-
-UNPRUNED_PREFIXES = ("base_", "point")
-"""Parameters without a meaningful nominal value (where the instrument stands, where a
-reflector sits): estimated whenever visible, never held for being close to the start."""
 
 LOSSES = ("linear", "huber", "soft_l1")
 
@@ -154,7 +139,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
     q_work = workspace_poses(start)
     order = [names[i] for i in pivot_order(names) if names[i] in start_analysis.base_parameters]
     point, weights = start, np.ones((start_analysis.n_poses, make(start, names=names).m))
-    iterations, history, pruned, frozen, seen = 0, [], {}, {}, []
+    iterations, history, pruned, frozen, seen, protected = 0, [], {}, {}, [], set()
     end_analysis, settled = start_analysis, False
     rounds = 0
     for rounds in range(1, MAX_ROUNDS + 1):  # noqa: B007 (the count is reported)
@@ -181,9 +166,20 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         frozen.update(dict.fromkeys(lost, FROZEN))
         J_work = workspace_jacobian(point, q_work, names, full)
         noise = float(np.sqrt(3 * np.mean(1.0 / settings.w**2))) if settings.known else None
-        # without σ, residuals and standard errors still hold what a newcomer may explain
-        fresh = frozenset() if settings.known else frozenset(visible) - set(order)
-        keep, dropped = prune(J, r, names, visible, settings.known, e0, J_work, noise, fresh)
+        offsets = np.array([point.parameters[n] - hold[n] for n in visible])
+        keep, dropped = prune(
+            J,
+            r,
+            names,
+            visible,
+            offsets,
+            settings.known,
+            e0,
+            J_work,
+            noise,
+            set(order),
+            protected,
+        )
         pruned.update(dropped)
         seen.append(frozenset(order))
         dropped = [n for n in dropped if n in order]  # newcomers held at once were never fitted
@@ -192,8 +188,16 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
             # and keeps its fitted value, and a minimum over the larger set is one over
             # the rest with it fixed, so the fit has settled where it stands
             order = keep
-            settled = True
-            break
+            misjudged = _held_that_matter(J, r, names, order, pruned, settings)
+            if not misjudged or protected:
+                settled = True
+                break
+            # the data see what was held as useless: estimate it after all (once)
+            protected |= set(misjudged)
+            for n in misjudged:
+                del pruned[n]
+            order = [*order, *misjudged]
+            continue
         if frozenset(keep) in seen:
             break
         if dropped:
@@ -222,11 +226,20 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
     )
 
 
-FROZEN = "blind where the fit ended; held at the value it was fitted to while it was visible"
-
 FROZEN = "blind where the fit ended; held at the value it was fitted to while visible"
 
 WORKSPACE_POSES = 200
+
+
+def _held_that_matter(J, r, names, order, pruned, settings) -> list[str]:
+    """The parameters held as useless, if freeing them would gain more than chance."""
+    useless = [n for n, why in pruned.items() if WIDE not in why and n in names]
+    if not useless:
+        return []
+    dof = r.size - len(order)
+    scale = 1.0 if settings.known else (float(r @ r) / dof if dof > 0 else 1.0)
+    gain = held_gain(J, r, names, order, useless)
+    return [n for n in names if n in useless] if held_matter(gain, len(useless), scale)[0] else []
 
 
 def _release(make, point, names, settings, weights, hold, order, base, r):
@@ -334,95 +347,6 @@ def _robust_sd(e: np.ndarray) -> float:
     return float(np.median(e)) / 1.538 or 1e-12
 
 
-def prune(J, r, names, candidates, known, e0, J_work, noise, fresh=frozenset()):
-    """The noise-aware rank: which of the structurally identifiable `candidates` to hold.
-
-    From the current point, the covariance C of the candidates' estimates is that of one
-    more Gauss-Newton step. What a candidate's uncertainty does to predictions is its
-    *spread*: the RMS displacement of the measured points, over poses spread across the
-    workspace (`J_work`), that its uncertainty adds given all the others, i.e. the drop
-    in the predicted variance ``mean |J_work C J_workᵀ|`` when it is held (exact for a
-    Gaussian: ``|J_work C e_j|² / C_jj``). Marginal standard errors would overstate it
-    for correlated parameters: coaxial joints know their sum well and only their
-    difference poorly. A candidate (other than the frames, `UNPRUNED_PREFIXES`) with a
-    standard error above `NEGLIGIBLE_SE` is held when
-
-    - its spread exceeds `e0`, the whole uncalibrated error: the paper's lockstep
-      schedule with few poses determines some lengths only to metres, and such an
-      estimate could only make the robot worse where it was not measured; or
-    - its standard error exceeds `PLAUSIBLE_DEVIATION` (2.5 mm, 0.5°) while its spread is
-      below half the `noise`: a wrist angle seen through a tool point 0.3 mm off its axis
-      is known only to degrees and changes nothing a measurement could see, while its
-      correlations blur the estimates beside it. (The bias holding it leaves is then at
-      most its spread, so a few such parameters together stay within the noise.)
-
-    Candidates are held one at a time and the others' covariance is conditioned exactly,
-    so correlated pairs lose one member, not both. Among those over a limit, the one
-    latest in `candidates` (given in seniority, then `pivot_order`) goes first, as in the
-    structural base set: the choice does not depend on the noise.
-
-    Parameters
-    ----------
-    J, r : ndarray
-        Weighted Jacobian (all `names`) and residual at the current point.
-    names, candidates : sequence of str
-    known : bool
-        Whether the weights are 1/σ.
-    e0 : float
-        Uncalibrated RMS error, m.
-    J_work : ndarray, shape (3 n, len(names))
-        Unweighted Jacobian of n measured points at workspace poses, m per unit.
-    noise : float or None
-        RMS noise of a measured point, m; None when no σ is stated: then it is taken from
-        what the candidates would leave after one more step.
-    fresh : set of str
-        Candidates not to hold for moving nothing measurable yet: without a stated σ, those
-        no round has fitted, since until then the residual (and the standard errors taken
-        from it) still holds what they may explain.
-
-    Returns
-    -------
-    keep : list of str
-    dropped : dict of str to str
-        Each held candidate with the reason, in words and units.
-    """
-    if not candidates:
-        return [], {}
-    idx = [names.index(n) for n in candidates]
-    Jc = J[:, idx]
-    step, _ = gauss_newton_step(Jc, r)
-    C = covariance(Jc, r - Jc @ step, known)
-    if noise is None:  # unweighted residuals, m: per-coordinate RMS, times √3 per point
-        rest = r - Jc @ step
-        noise = float(np.sqrt(3 * np.mean(rest**2)))
-    W = J_work[:, idx]
-    n_points = W.shape[0] / 3
-    free = np.array([not n.startswith(UNPRUNED_PREFIXES) for n in candidates])
-    plausible = np.array([PLAUSIBLE_DEVIATION[unit(n)] for n in candidates])
-    untried = np.array([n in fresh for n in candidates])
-    active = list(range(len(idx)))
-    dropped = {}
-    while active:
-        a = np.array(active)
-        Ca = C[np.ix_(a, a)]
-        var = np.clip(np.diag(Ca), 0.0, None)
-        se = np.sqrt(var)
-        explained = np.sum((W[:, a] @ Ca) ** 2, axis=0) / np.where(var > 0, var, np.inf)
-        spread = np.sqrt(explained / n_points)  # m, RMS over the workspace points
-        too_wide = spread > e0
-        useless = (se > plausible[a]) & (spread <= 0.5 * noise) & ~untried[a]
-        bad = free[a] & (se > NEGLIGIBLE_SE) & (too_wide | useless)
-        if not bad.any():
-            break
-        pos = int(np.flatnonzero(bad)[-1])
-        j = int(a[pos])
-        dropped[candidates[j]] = _reason(candidates[j], se[pos], spread[pos], e0, too_wide[pos])
-        c = C[:, j].copy()
-        C = C - np.outer(c, c) / C[j, j]
-        active.remove(j)
-    return [candidates[k] for k in active], dropped
-
-
 def workspace_jacobian(point: Robot, q_work, names, full: Problem) -> np.ndarray:
     """Unweighted Jacobian of the measured points at workspace poses, (3 n, k), m/unit.
 
@@ -437,21 +361,3 @@ def workspace_jacobian(point: Robot, q_work, names, full: Problem) -> np.ndarray
     chain = full.chain
     J = chain.evaluate("points_jacobian", q_work, point.vector(), full.kernel_columns)
     return J.reshape(-1, J.shape[-1])[:, full.take]
-
-
-WIDE = "more than the whole uncalibrated error"
-
-
-def _reason(name: str, se: float, spread: float, e0: float, too_wide: bool) -> str:
-    scale, u = (1e3, "mm") if unit(name) == "m" else (180 / np.pi, "°")
-    text = f"its standard error would be {se * scale:.3g} {u}"
-    if too_wide:
-        return (
-            text + f", moving the tool by {spread * 1e3:.3g} mm RMS on poses across the "
-            f"workspace, {WIDE} ({e0 * 1e3:.3g} mm)"
-        )
-    limit = PLAUSIBLE_DEVIATION[unit(name)] * scale
-    return (
-        text + f", more than any real deviation ({limit:g} {u}), while it moves the tool by "
-        f"only {spread * 1e3:.3g} mm RMS, below the noise"
-    )
