@@ -434,7 +434,7 @@ REPRESENTED = 0.05
 named in their combinations; beyond it the held parameter is its own, unestimated effect."""
 
 
-def represent(J: np.ndarray, names, estimated) -> Representation:
+def represent(J: np.ndarray, names, estimated, exclude=()) -> Representation:
     """Express each held parameter's column by the estimated ones (least squares).
 
     Parameters
@@ -444,12 +444,15 @@ def represent(J: np.ndarray, names, estimated) -> Representation:
     names : sequence of str
     estimated : sequence of str
         A subset of `names`.
+    exclude : sequence of str
+        Held parameters to leave out of the combinations (held for the noise: their effect
+        is below it, and naming them in every estimate would say nothing useful).
     """
     names = list(names)
     if J.shape[0] > J.shape[1]:
         J = np.linalg.qr(J, mode="r")
     est = [names.index(n) for n in estimated]
-    held = [i for i in range(len(names)) if i not in set(est)]
+    held = [i for i in range(len(names)) if i not in set(est) and names[i] not in exclude]
     norms = np.linalg.norm(J, axis=0)
     terms: dict[str, list] = {names[i]: [] for i in est}
     misfit: dict[str, float] = {}

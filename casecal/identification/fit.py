@@ -265,7 +265,7 @@ def _representation(calibrated, final, frame, make_world, names, out):
         final = make_world(calibrated, names=names)
     if out.end_analysis is out.start_analysis:  # one-shot: what it saw where it linearised
         final = make_world(frame.robot_out(out.start_robot), names=names)
-    return represent(final.jacobian(np.zeros(len(names))), names, out.estimated)
+    return represent(final.jacobian(np.zeros(len(names))), names, out.estimated, out.pruned)
 
 
 def _blind_only_here(final: Problem, out, names) -> tuple[str, ...]:
