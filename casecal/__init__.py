@@ -1,75 +1,96 @@
 """casecal: kinematic calibration of serial robot arms.
 
-A robot is a CasADi graph of its Denavit-Hartenberg chain, with exact Jacobians of the
-end-effector position with respect to every geometric parameter. See DESIGN.md for the data
-flow and README.md for the commands.
+A robot is a CasADi graph of its kinematic chain, with exact Jacobians of the end-effector
+position with respect to every parameter. See DESIGN.md for the data flow and README.md for
+the commands.
+
+The public names below are loaded on first use (PEP 562), so ``import casecal`` and the
+``casecal`` command start at once and Ctrl-C is answered from the first moment.
 """
 
-from .data.files import read_csv, write_csv
-from .data.measurements import Measurements, simulate
-from .design import poses
-from .design.campaign import calibrate_until
-from .errors import CalibrationError, CalibrationWarning
-from .identification.analysis import Observability, observability
-from .identification.calibration import Calibration
-from .identification.fit import identify
-from .identification.validation import Validation, validate
-from .model.catalog import load_robot, robot_to_toml, robots
-from .model.robot import Frame, Joint, Robot
+from __future__ import annotations
 
-__all__ = [
-    "Calibration",
-    "CalibrationError",
-    "CalibrationWarning",
-    "Frame",
-    "Joint",
-    "Measurements",
-    "Observability",
-    "Robot",
-    "Validation",
-    "calibrate_until",
-    "identify",
-    "load_robot",
-    "observability",
-    "poses",
-    "read_csv",
-    "robot_to_toml",
-    "robots",
-    "simulate",
-    "validate",
-    "write_csv",
-]
+import importlib
+import importlib.abc
+import importlib.util
+import sys
+
 __version__ = "0.1.0"
 
+_PUBLIC = {
+    "Calibration": "identification.calibration",
+    "CalibrationError": "errors",
+    "CalibrationWarning": "errors",
+    "Frame": "model.robot",
+    "Joint": "model.robot",
+    "Measurements": "data.measurements",
+    "Observability": "identification.analysis",
+    "Robot": "model.robot",
+    "Validation": "identification.validation",
+    "calibrate_until": "design.campaign",
+    "identify": "identification.fit",
+    "load_robot": "model.catalog",
+    "observability": "identification.analysis",
+    "read_csv": "data.files",
+    "robot_to_toml": "model.catalog",
+    "robots": "model.catalog",
+    "simulate": "data.measurements",
+    "validate": "identification.validation",
+    "write_csv": "data.files",
+}
+_MODULES = {"poses": "design.poses"}
 
-def _keep_old_module_paths() -> None:
-    """Let scripts written for the flat layout of casecal 0.1 (``casecal.catalog``,
-    ``from casecal.parameters import select`` …) keep working after the move into
-    packages: each old path names the module that now holds the same code."""
-    import importlib
-    import sys
+_MOVED = {
+    # module paths of casecal 0.1's flat layout, kept for scripts that import them
+    "parameters": "model.parameters",
+    "kinematics": "model.kinematics",
+    "robot": "model.robot",
+    "frames": "model.frames",
+    "catalog": "model.catalog",
+    "measurements": "data.measurements",
+    "measurement_files": "data.files",
+    "identifiability": "identification.analysis",
+    "solvers": "identification.solvers",
+    "calibration": "identification.calibration",
+    "summary": "identification.summary",
+    "validation": "identification.validation",
+    "distances": "identification.distances",
+    "campaign": "design.campaign",
+    "study": "studies.engine",
+}
 
-    moved = {
-        "parameters": "model.parameters",
-        "kinematics": "model.kinematics",
-        "robot": "model.robot",
-        "frames": "model.frames",
-        "catalog": "model.catalog",
-        "measurements": "data.measurements",
-        "measurement_files": "data.files",
-        "identifiability": "identification.analysis",
-        "solvers": "identification.solvers",
-        "calibration": "identification.calibration",
-        "summary": "identification.summary",
-        "validation": "identification.validation",
-        "distances": "identification.distances",
-        "campaign": "design.campaign",
-        "study": "studies.engine",
-    }
-    for old, new in moved.items():
-        module = importlib.import_module(f"{__name__}.{new}")
-        sys.modules.setdefault(f"{__name__}.{old}", module)
-        globals().setdefault(old, module)
+__all__ = sorted([*_PUBLIC, *_MODULES])
 
 
-_keep_old_module_paths()
+def __getattr__(name: str):
+    if name in _PUBLIC:
+        value = getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
+    elif name in _MODULES or name in _MOVED:
+        value = importlib.import_module(f"{__name__}.{(_MODULES | _MOVED)[name]}")
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_PUBLIC, *_MODULES, *_MOVED])
+
+
+class _MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """``import casecal.catalog`` (casecal 0.1's path) gives casecal.model.catalog."""
+
+    def find_spec(self, fullname, path=None, target=None):
+        prefix, _, leaf = fullname.rpartition(".")
+        if prefix != __name__ or leaf not in _MOVED:
+            return None
+        return importlib.util.spec_from_loader(fullname, self)
+
+    def create_module(self, spec):
+        return importlib.import_module(f"{__name__}.{_MOVED[spec.name.rpartition('.')[2]]}")
+
+    def exec_module(self, module) -> None:
+        pass  # the module it stands for is already executed
+
+
+sys.meta_path.append(_MovedModules())

@@ -11,12 +11,13 @@ import logging
 import math
 import os
 import sys
+import time
 import warnings
 
 import numpy as np
 
 from . import __version__
-from .data.files import read_csv, write_atomic, write_csv
+from .data.files import read_csv, write_atomic, write_csv, write_together
 from .data.measurements import simulate
 from .design import poses
 from .errors import CalibrationError
@@ -67,6 +68,7 @@ def _cmd_simulate(args: argparse.Namespace) -> None:
     q = _schedule(robot, args)
     meas = simulate(true, q, noise=parse_length(args.noise), seed=args.seed)
     write_csv(args.output, meas, robot)
+    WRITTEN.append(str(args.output))
     shift = np.linalg.norm(meas.positions - robot.position(q), axis=1)
     print(f"wrote {meas.n_poses} poses of {robot.name} ({args.schedule} schedule) to {args.output}")
     print(
@@ -138,22 +140,44 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         loss=args.loss,
         loss_scale=args.loss_scale,
         orientation_sigma=rot,
+        progress=_progress_line(meas.n_poses),
     )
+    if meas.n_poses >= PROGRESS_POSES:
+        print(file=sys.stderr)  # end the progress line
     print(cal.summary())
     if args.strict and cal.unidentifiable:
         raise CalibrationError(
             f"--strict: the data cannot identify {', '.join(cal.unidentifiable)}; ask for "
             "fewer parameters or measure more varied poses (nothing written)"
         )
+    if not cal.success:
+        raise CalibrationError(f"the fit did not pass ({cal.message}); nothing written")
+    # what was asked to be written is written as soon as the fit is good
+    _write_outputs(args, cal)
     if held is not None:
         print(f"\nValidation on {held.n_poses} held-out poses (--holdout {args.holdout}):")
-        print(validate(cal.robot, held, robot))
-    if not cal.success:
-        raise CalibrationError(f"the fit did not converge ({cal.message}); nothing written")
-    _write_calibrated(args, cal.robot)
-    if args.deviations_out:
-        write_atomic(args.deviations_out, _deviations_text(cal, args.deviations_out))
-        print(f"deviations with standard errors written to {args.deviations_out}")
+        try:
+            print(validate(cal.robot, held, robot))
+        except CalibrationError as exc:
+            written = " (the calibrated files above were written)" if args.output else ""
+            raise CalibrationError(f"hold-out validation failed{written}: {exc}") from None
+
+
+PROGRESS_POSES = 10_000
+"""Fits of at least this many poses show their iterations on stderr as they go."""
+
+
+def _progress_line(n_poses: int):
+    """A callback that rewrites one stderr line per iteration, for long fits only."""
+    if n_poses < PROGRESS_POSES:
+        return None
+    start = time.perf_counter()
+
+    def show(line: str) -> None:
+        elapsed = time.perf_counter() - start
+        print(f"\rcasecal: {n_poses} poses, {line} ({elapsed:.1f} s)", end="", file=sys.stderr)
+
+    return show
 
 
 def _identify_distances(args: argparse.Namespace, robot) -> None:
@@ -169,16 +193,36 @@ def _identify_distances(args: argparse.Namespace, robot) -> None:
     print(f"{meas.n_pairs} distances between {len(meas.q)} poses")
     print(cal.summary())
     if not cal.success:
-        raise CalibrationError(f"the fit did not converge ({cal.message}); nothing written")
+        raise CalibrationError(f"the fit did not pass ({cal.message}); nothing written")
     _write_calibrated(args, cal.robot)
 
 
 def _write_calibrated(args: argparse.Namespace, robot) -> None:
     """Write -o's calibrated robot file, recording which nominal it came from."""
     if args.output:
-        calibrated = dataclasses.replace(robot, calibrated_from=args.robot, auto_beta=False)
-        write_atomic(args.output, robot_to_toml(calibrated))
+        write_atomic(args.output, _robot_text(args, robot))
+        WRITTEN.append(str(args.output))
         print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
+
+
+def _robot_text(args: argparse.Namespace, robot) -> str:
+    return robot_to_toml(dataclasses.replace(robot, calibrated_from=args.robot, auto_beta=False))
+
+
+def _write_outputs(args: argparse.Namespace, cal) -> None:
+    """-o and --deviations-out together: both written to temporary files first, then
+    renamed, the robot file last (it is the calibration; the deviations describe it)."""
+    files = []
+    if args.deviations_out:
+        files.append((args.deviations_out, _deviations_text(cal, args.deviations_out)))
+    if args.output:
+        files.append((args.output, _robot_text(args, cal.robot)))
+    write_together(files)
+    WRITTEN.extend(str(path) for path, _ in files)
+    if args.output:
+        print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
+    if args.deviations_out:
+        print(f"deviations with standard errors written to {args.deviations_out}")
 
 
 def _deviations_text(cal, path: str) -> str:
@@ -611,7 +655,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the ``casecal`` command; returns the exit code."""
+    """Run the ``casecal`` command; returns the exit code.
+
+    0 success; 2 a user error, one line on stderr; 130 interrupted (Ctrl-C), one line
+    saying what was written; 1 a bug, with its traceback.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     level = {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG)
@@ -622,9 +670,21 @@ def main(argv: list[str] | None = None) -> int:
     except CalibrationError as exc:
         print(f"casecal: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        written = ", ".join(WRITTEN) if WRITTEN else "nothing was written"
+        print(f"casecal: interrupted; {written}", file=sys.stderr)
+        return 130
     except BrokenPipeError:  # e.g. `casecal robots | head`
         return 0
+    except OSError as exc:  # the system refused a read or write the library did not foresee
+        where = f" {exc.filename!r}" if exc.filename else ""
+        print(f"casecal: error:{where} {exc.strerror or exc}", file=sys.stderr)
+        return 2
     return 0
+
+
+WRITTEN: list[str] = []
+"""Files this run has written, for the one line printed when it is interrupted."""
 
 
 if __name__ == "__main__":

@@ -158,7 +158,6 @@ CSV_CASES = [
     case("csv-header-without-rows", IDENTIFY, {"m.csv": ",".join(RR_HEADER) + "\n"}),
     case("csv-unclosed-quote", IDENTIFY, {"m.csv": VALID_CSV + '1,2,"3,4,5\n'}),
     case("csv-not-utf8", IDENTIFY, {"m.csv": b"\xff\xfeq1,q2\x80\n\x81,\x82\n"}),
-    case("csv-semicolon-separated", IDENTIFY, {"m.csv": VALID_CSV.replace(",", ";")}),
     case("csv-negative-sigma", IDENTIFY, {"m.csv": _rr_csv(add=("sigma_mm", "-0.01"))}),
     case("csv-nan-sigma", IDENTIFY, {"m.csv": _rr_csv(add=("sigma_mm", "nan"))}),
     case(

@@ -16,12 +16,10 @@ Every mistake raises `CalibrationError` naming the file, the row or column, and 
 
 from __future__ import annotations
 
+import io
 import math
-import os
 import re
-import tempfile
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -29,6 +27,7 @@ import pandas as pd
 from ..errors import CalibrationError, CalibrationWarning
 from ..model.frames import matrix_from_quaternion, quaternion_from_matrix
 from ..model.robot import Robot
+from ..textio import read_text, write_atomic, write_together  # noqa: F401 (re-export)
 from .measurements import Measurements
 
 _SCALE = {"": 1.0, "m": 1.0, "mm": 1e-3, "um": 1e-6, "rad": 1.0, "deg": math.pi / 180.0}
@@ -53,6 +52,8 @@ def read_csv(path, robot: Robot) -> Measurements:
     columns = list(df.columns)
     q = read_joints(df, robot, label)
     y = _positions(df, columns, label)
+    if not any(re.fullmatch(r"(p\d+_)?[xyz]_(mm|m|um)", c) for c in columns):
+        _check_metres(y, robot, label)
     orientations = _orientations(df, columns, label)
     sigma = np.zeros((len(df), 3))
     if any(c in df for c in ("sigma", "sigma_m", "sigma_mm", "sigma_um")):
@@ -84,7 +85,31 @@ def _warn_outside_limits(q: np.ndarray, robot: Robot, label: str) -> None:
             )
 
 
+MM_MARGIN = 10.0
+"""Measured points spread over more than this many times the robot's largest possible
+span (twice its reach) cannot be metres: they are millimetres read as metres."""
+
 _POINT = re.compile(r"^p(\d+)_([xyz])(?:_(mm|m|um))?$")
+
+
+def _check_metres(y: np.ndarray, robot: Robot, label: str) -> None:
+    """Refuse positions in bare columns (metres) that only make sense as millimetres.
+
+    Wherever the instrument stands, the measured points of one robot lie within twice its
+    reach of each other (`Robot.reach`); points a thousand times farther apart are
+    millimetres read as metres.
+    """
+    reach = robot.reach
+    if reach is None or reach <= 0:
+        return
+    points = y.reshape(-1, 3)
+    span = float(np.max(np.ptp(points, axis=0)))
+    if span > MM_MARGIN * 2 * reach:
+        raise CalibrationError(
+            f"{label}: the measured points span {span:.4g} in the x, y, z columns, which are "
+            f"metres, but {robot.name!r} reaches at most {reach:.3g} m from its base: they "
+            "look like millimetres; name the columns x_mm, y_mm, z_mm (or p1_x_mm, …)"
+        )
 
 
 def _positions(df: pd.DataFrame, columns, label: str) -> np.ndarray:
@@ -135,16 +160,27 @@ def _orientations(df: pd.DataFrame, columns, label: str) -> np.ndarray | None:
 
 def read_table(path) -> tuple[pd.DataFrame, str]:
     """A CSV file as a DataFrame of strings, checked: it exists, parses, has unique columns
-    and at least one row. Returns the frame and the label for messages."""
-    label = str(path)
-    if not Path(path).is_file():
-        raise CalibrationError(f"file {label!r} does not exist; check the path")
+    and at least one row. Returns the frame and the label for messages.
+
+    `path` may be ``"-"`` (standard input), a pipe or a process substitution. Commas
+    separate the columns; a file whose header is split by tabs or semicolons instead is
+    read with that separator.
+    """
+    label = "standard input" if str(path) == "-" else str(path)
+    text = read_text(path, "measurement file")
+    first = text.split("\n", 1)[0]
+    sep = next((d for d in ("\t", ";") if d in first and "," not in first), ",")
     try:
         with warnings.catch_warnings():
             # a row with more fields than the header must fail, not lose or shift data
             warnings.simplefilter("error", pd.errors.ParserWarning)
             df = pd.read_csv(
-                path, dtype=str, keep_default_na=False, skipinitialspace=True, index_col=False
+                io.StringIO(text),
+                sep=sep,
+                dtype=str,
+                keep_default_na=False,
+                skipinitialspace=True,
+                index_col=False,
             )
     except pd.errors.ParserWarning:
         raise CalibrationError(
@@ -155,7 +191,7 @@ def read_table(path) -> tuple[pd.DataFrame, str]:
         raise CalibrationError(
             f"{label}: the file is empty; it needs a header and one row per pose"
         ) from None
-    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
+    except (pd.errors.ParserError, ValueError) as exc:
         detail = " ".join(str(exc).split())  # pandas' messages span lines
         raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
     columns = [str(c).strip() for c in df.columns]
@@ -176,6 +212,8 @@ def read_joints(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
     for i, joint in enumerate(robot.joints, start=1):
         name, scale = _pick(df, label, [f"q{i}"], joint)
         q[:, i - 1] = _numbers(df, name, label) * scale
+        if name == f"q{i}":
+            _check_joint_unit(q[:, i - 1], joint, name, label)
     extra = [c for c in columns if (m := _JOINT.match(c)) and int(m.group(1)) > robot.dof]
     if extra:
         raise CalibrationError(
@@ -184,6 +222,30 @@ def read_joints(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
         )
     _warn_outside_limits(q, robot, label)
     return q
+
+
+def _check_joint_unit(values: np.ndarray, joint, name: str, label: str) -> None:
+    """Refuse bare joint columns (rad, m) whose values only make sense as deg or mm.
+
+    A revolute joint's values beyond two turns (or, with limits, beyond twice its range and
+    a full turn) are degrees; a prismatic joint's beyond ten times its travel, millimetres.
+    """
+    largest = float(np.max(np.abs(values)))
+    if joint.type == "R":
+        span = max((abs(v) for v in joint.limits), default=np.pi) if joint.limits else np.pi
+        if largest > max(2 * span, 2 * np.pi) + 1e-9:
+            raise CalibrationError(
+                f"{label}: column {name!r} (radians) reaches {largest:.4g}, more than this "
+                f"revolute joint turns: the values look like degrees; name it {name}_deg"
+            )
+    elif joint.limits is not None:
+        travel = max(abs(v) for v in joint.limits)
+        if travel > 0 and largest > 10 * travel:
+            raise CalibrationError(
+                f"{label}: column {name!r} (metres) reaches {largest:.4g}, more than ten times "
+                f"this prismatic joint's travel ({travel:.3g} m): the values look like "
+                f"millimetres; name it {name}_mm"
+            )
 
 
 def write_csv(path, measurements: Measurements, robot: Robot) -> None:
@@ -220,32 +282,6 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
                 data[f"sigma_{axis}_mm"] = sigma[:, k] * 1e3
     text = pd.DataFrame(data).to_csv(index=False, float_format="%.17g", lineterminator="\n")
     write_atomic(path, text)
-
-
-def write_atomic(path, text: str) -> None:
-    """Write `text` to `path` through a temporary file and a rename: never half a file."""
-    if not str(path).strip():
-        raise CalibrationError("the output file name is empty; give a file name")
-    path = Path(path)
-    if path.is_dir():
-        raise CalibrationError(f"{str(path)!r} is a folder; give a file name")
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or Path("."))
-    except OSError as exc:
-        raise CalibrationError(
-            f"cannot write {str(path)!r}: {exc.strerror}; check that its folder exists and is "
-            "writable"
-        ) from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except IsADirectoryError:
-        Path(tmp).unlink(missing_ok=True)
-        raise CalibrationError(f"{str(path)!r} is a folder; give a file name") from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _mangled(columns) -> set[str]:

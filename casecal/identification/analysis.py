@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 
 from ..errors import CalibrationError
 from ..model.parameters import select, unit
@@ -388,6 +387,8 @@ def _base_parameters(
             basis = np.column_stack([basis, v / norm])
             chosen.append(names[i])
     if len(chosen) != rank:
+        import scipy.linalg  # rarely needed, slow to import
+
         _, _, perm = scipy.linalg.qr(Js, mode="economic", pivoting=True)
         chosen = [names[i] for i in perm[:rank] if not zero[i]]
     return tuple(n for n in names if n in chosen)

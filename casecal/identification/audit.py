@@ -33,13 +33,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.stats
 
 from ..design.poses import uniform
 from ..errors import CalibrationError
 from ..model import kinematics
 from ..model.robot import Robot
-from .rank import held_matter
+from .rank import chi2_quantile, held_matter
 
 OPTIMALITY = 0.05
 """Largest cost decrease one more step may still promise, in noise variances: the fit is
@@ -205,7 +204,7 @@ def _noise(f: Facts) -> Check:
         if f.dof <= 0:
             return Check(name, None, "no residual degrees of freedom")
         chi2 = 2.0 * f.cost_final / f.dof
-        bound = SIGMA_SLACK**2 * scipy.stats.chi2.ppf(CHI2_LEVEL, f.dof) / f.dof
+        bound = SIGMA_SLACK**2 * chi2_quantile(CHI2_LEVEL, f.dof) / f.dof
         ok = chi2 <= bound
         text = f"reduced χ² = {chi2:.3g} (bound {bound:.3g}; residuals {np.sqrt(chi2):.3g}× σ)"
         if not ok:

@@ -63,6 +63,7 @@ def identify(
     orientation_sigma: float | None = None,
     loss: str = "linear",
     loss_scale: float = 3.0,
+    progress=None,
 ) -> Calibration:
     """Identify the parameter deviations of `robot` from measured positions.
 
@@ -108,6 +109,9 @@ def identify(
     loss_scale : float
         c: in units of the measurement σ when σ is given (default 3 σ), otherwise in units
         of the residuals' robust standard deviation (from their median).
+    progress : callable(str), optional
+        Called with one line per solver iteration ("round 1, iteration 3: RMS 0.021 mm"),
+        for showing the progress of long fits.
 
     Returns
     -------
@@ -165,7 +169,7 @@ def identify(
         start, start_note = partial_base_start(robot, lambda r, n: make(r, names=n), names)
     e0 = _rms(make(start, names=names).point_residuals(np.zeros(len(names))))
     settings = Settings(
-        method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior
+        method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior, progress
     )
     out = fit_in_rounds(make, start, names, settings, e0)
 

@@ -36,7 +36,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.stats
 
 from ..model.parameters import unit
 from .linalg import column_scales, gauss_newton_step, nr_threshold
@@ -73,6 +72,13 @@ a heavier tail than χ² (0.2 % of fits pass 99.9 % by chance where 0.1 % should
 parameter the data do see gains tens to hundreds of noise variances."""
 
 
+def chi2_quantile(level: float, dof: int) -> float:
+    """The `level` quantile of χ² with `dof` degrees of freedom."""
+    from scipy.special import chdtri  # imported here: scipy adds a second to startup
+
+    return float(chdtri(dof, 1.0 - level))
+
+
 def held_gain(J: np.ndarray, r: np.ndarray, names, estimated, held) -> float:
     """Cost decrease (one linearised step) that freeing `held` would add to what the
     `estimated` parameters can still gain; `J` (weighted, all `names`) and `r` at the point."""
@@ -85,7 +91,7 @@ def held_matter(gain: float, n_held: int, scale: float) -> tuple[bool, float, fl
     """Whether a cost `gain` (in units where the noise variance is `scale`) from freeing
     `n_held` parameters is beyond chance; returns (matter, χ² statistic, χ² bound)."""
     statistic = 2.0 * gain / scale if scale > 0 else 0.0
-    bound = float(scipy.stats.chi2.ppf(HELD_LEVEL, n_held)) if n_held else np.inf
+    bound = float(chi2_quantile(HELD_LEVEL, n_held)) if n_held else np.inf
     return statistic > bound, statistic, bound
 
 

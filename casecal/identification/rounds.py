@@ -27,6 +27,7 @@ one-shot ``"svd"`` method is the paper's procedure and runs a single round witho
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -58,6 +59,8 @@ class Settings:
     loss_scale: float = 3.0
     bounds: dict = field(default_factory=dict)
     prior: dict = field(default_factory=dict)
+    progress: Callable[[str], None] | None = None
+    """Called with a line on each iteration of a long fit (the caller decides to show it)."""
 
 
 @dataclass(frozen=True)
@@ -142,9 +145,9 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
     iterations, history, pruned, frozen, seen, protected = 0, [], {}, {}, [], set()
     end_analysis, settled = start_analysis, False
     rounds = 0
-    for rounds in range(1, MAX_ROUNDS + 1):  # noqa: B007 (the count is reported)
+    for rounds in range(1, MAX_ROUNDS + 1):
         point, its, status, hist, message, weights = _solve_round(
-            make, point, names, order, settings, weights, hold
+            make, point, names, order, settings, weights, hold, rounds
         )
         iterations += its
         history += hist if not history else hist[1:]
@@ -290,11 +293,21 @@ def _problem(make, point, names, settings: Settings, weights) -> Problem:
     return problem if settings.loss == "linear" else problem.reweighted(weights)
 
 
-def _solve_round(make, point, names, estimated, settings: Settings, weights, hold):
+def _solve_round(make, point, names, estimated, settings: Settings, weights, hold, rnd=1):
     """One round: the solver (inside iteratively reweighted least squares for a robust
     loss) on the `estimated` parameters from `point`."""
     solver = SOLVERS[settings.method]
     kwargs = {"max_iterations": settings.max_iterations, "tolerance": settings.tolerance}
+    if settings.progress is not None:
+        rows = settings.w.size  # cost → RMS per coordinate, in σ (or m) units
+        # weighted residuals are in σ; back to mm with the RMS σ (1 without σ: in m)
+        scale = 1e3 * float(np.sqrt(np.mean(1.0 / settings.w**2)))
+
+        def report(it: int, cost: float) -> None:
+            rms = scale * np.sqrt(2.0 * cost / rows)
+            settings.progress(f"round {rnd}, iteration {it}: RMS {rms:.4g} mm per coordinate")
+
+        kwargs["callback"] = report
     if settings.method == "ipopt":
         # bounds and prior are on deviations from nominal; x is from the current point
         offset = {n: point.parameters[n] - hold[n] for n in estimated}

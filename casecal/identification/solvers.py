@@ -17,7 +17,7 @@ from .linalg import gauss_newton_step, svd_solve
 from .problem import Problem
 
 
-def _svd(problem: Problem, x0, **_):
+def _svd(problem: Problem, x0, callback=None, **_):
     r0 = problem.residual(x0)
     x = x0 + svd_solve(problem.jacobian(x0), r0)
     r1 = problem.residual(x)
@@ -51,7 +51,7 @@ def _converged(predicted: float, cost: float, tolerance: float, floor: float) ->
     return predicted <= tolerance * cost + floor
 
 
-def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, **_):
+def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
     for it in range(1, max_iterations + 1):
         J = problem.jacobian(x)
@@ -72,6 +72,8 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, **_):
             )
             x, r, cost = x_new, r_new, cost_new
             history.append(cost)
+            if callback is not None:
+                callback(it, cost)
             if cost <= floor:
                 return x, it, 4, history, None
             if small or done:
@@ -82,7 +84,7 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, **_):
     return x, max_iterations, 0, history, None
 
 
-def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, **_):
+def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
     J = problem.jacobian(x)
     norms = np.linalg.norm(J, axis=0)
@@ -115,6 +117,8 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, **_):
         if rho > 0:
             x, r, cost = x_new, r_new, cost_new
             history.append(cost)
+            if callback is not None:
+                callback(it, cost)
             if cost <= floor:
                 return x, it, 4, history, None
             if small:
@@ -194,7 +198,16 @@ class _Callback(ca.Callback):
         return self._keep
 
 
-def _ipopt(problem: Problem, x0, max_iterations, tolerance, bounds, prior, prior_offset=None):
+def _ipopt(
+    problem: Problem,
+    x0,
+    max_iterations,
+    tolerance,
+    bounds,
+    prior,
+    prior_offset=None,
+    callback=None,
+):
     """IPOPT on the scaled problem, objective normalised by its start value, GN Hessian.
 
     The objective, its gradient and the Gauss-Newton Hessian ``JᵀJ`` are CasADi Callbacks

@@ -12,7 +12,6 @@ from ..errors import CalibrationError
 from ..model.robot import Robot
 from .fit import identify
 
-FRAME_PARAMETERS = ("base_*", "tool_x", "tool_y", "tool_z", "point*")
 CONVERGENCE_CHECKS = ("converged", "residual did not grow")
 
 
@@ -57,8 +56,13 @@ class Validation:
 
 def refit_frames(robot: Robot, measurements: Measurements) -> ErrorStats:
     """Errors of `robot` on `measurements` after fitting its frames alone to them."""
+    frames = [
+        n
+        for n in robot.parameter_names
+        if n.startswith(("base_", "point")) or n in ("tool_x", "tool_y", "tool_z")
+    ]
     try:
-        cal = identify(robot, measurements, list(FRAME_PARAMETERS), "gauss-newton")
+        cal = identify(robot, measurements, frames, "gauss-newton")
     except CalibrationError as exc:
         raise CalibrationError(
             f"cannot refit the frames to the held-out data ({exc}); measure more poses"

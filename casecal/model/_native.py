@@ -8,17 +8,26 @@ costs one Python call. The shared library is cached in ``$CASECAL_CACHE`` or
 and of the code that generates it, so a structure is compiled once per machine and a warm
 process loads it without building any CasADi graph. Any failure (no compiler, read-only
 cache, compile error) falls back to CasADi's own evaluation, logged but never raised.
+
+A cached library is verified before it is loaded: a sidecar written at build time holds its
+size and SHA-256, and the library exports its own key's digest (`casecal_key`), checked
+once it is loaded and before any kernel runs. A file truncated by a full disk or a killed
+copy, one with flipped bytes, or kernels swapped between files would otherwise crash the
+process (SIGBUS, SIGSEGV, SIGILL); instead they are removed and rebuilt, with one warning.
+Build folders left behind by a killed compile are swept on the next build.
 """
 
 from __future__ import annotations
 
 import ctypes
 import hashlib
+import json
 import logging
 import os
 import shutil
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 import casadi as ca
@@ -29,6 +38,8 @@ log = logging.getLogger(__name__)
 CFLAGS = ("-O3", "-fPIC", "-shared", "-fno-math-errno")
 
 _DRIVER = """
+const char* casecal_key(void) {{ return "{key}"; }}
+
 int casecal_batch(const casadi_real* q, const casadi_real* p, casadi_real* out,
                   long long n_poses) {{
   const casadi_real* arg[{sz_arg}];
@@ -60,14 +71,15 @@ def compiler() -> str | None:
     return None
 
 
-def source(function: ca.Function) -> str:
-    """C source of `function` plus the batch driver."""
+def source(function: ca.Function, key: str = "") -> str:
+    """C source of `function` plus the batch driver, which also exports `key`."""
     with tempfile.TemporaryDirectory() as tmp:
         gen = ca.CodeGenerator("kernel.c", {"with_header": False})
         gen.add(function)
         gen.generate(tmp + os.sep)
         text = Path(tmp, "kernel.c").read_text()
     return text + _DRIVER.format(
+        key=key,
         name=function.name(),
         sz_arg=max(function.sz_arg(), 1),
         sz_res=max(function.sz_res(), 1),
@@ -111,13 +123,16 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
     digest = hashlib.sha256((fingerprint() + repr(key)).encode()).hexdigest()[:24]
     lib_path = cache_dir() / f"casecal_{digest}.so"
     try:
-        if not lib_path.exists():
+        lib = _load(lib_path, digest)
+        if lib is None:
             cc = compiler()
             if cc is None:
                 log.info("no C compiler found; using CasADi's own evaluation")
                 return None
-            _build(cc, source(build_function()), lib_path)
-        lib = ctypes.CDLL(str(lib_path))
+            _build(cc, source(build_function(), digest), lib_path)
+            lib = _load(lib_path, digest)
+        if lib is None:
+            raise OSError(f"the kernel just built at {lib_path} does not verify")
     except (OSError, subprocess.CalledProcessError) as exc:
         log.warning(
             "could not compile a kernel for %s (%s); using CasADi's own evaluation", key, exc
@@ -141,15 +156,94 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
     return call
 
 
+def _load(lib_path: Path, digest: str):
+    """The cached library at `lib_path` if it is whole and the right one, else None.
+
+    A library that fails a check is removed (one warning), so the caller rebuilds it.
+    """
+    if not lib_path.exists():
+        return None
+    problem = _damage(lib_path)
+    lib = None
+    if problem is None:
+        lib = ctypes.CDLL(str(lib_path))
+        key = getattr(lib, "casecal_key", None)
+        if key is None:
+            problem = "it exports no kernel key"
+        else:
+            key.restype = ctypes.c_char_p
+            if key() != digest.encode():
+                problem = "it holds another robot's kernel"
+    if problem is None:
+        return lib
+    if lib is not None:  # else dlopen would hand back this handle, not the rebuilt file
+        _close(lib)
+    log.warning("cached kernel %s is damaged (%s); rebuilding it", lib_path.name, problem)
+    for path in (lib_path, _sidecar(lib_path)):
+        path.unlink(missing_ok=True)
+    return None
+
+
+def _close(lib) -> None:
+    """Unload a library that failed its checks (POSIX dlclose; elsewhere it stays)."""
+    try:
+        import _ctypes
+
+        _ctypes.dlclose(lib._handle)
+    except (ImportError, AttributeError, OSError):
+        pass
+
+
+def _damage(lib_path: Path) -> str | None:
+    """Why the file at `lib_path` is not the library that was built there, or None."""
+    try:
+        record = json.loads(_sidecar(lib_path).read_text())
+        data = lib_path.read_bytes()
+    except (OSError, ValueError):
+        return "its size and checksum record is missing"
+    if len(data) != record.get("size"):
+        return f"{len(data)} bytes instead of {record.get('size')}"
+    if hashlib.sha256(data).hexdigest() != record.get("sha256"):
+        return "its checksum does not match"
+    return None
+
+
+def _sidecar(lib_path: Path) -> Path:
+    return lib_path.with_suffix(".json")
+
+
+BUILD_PREFIX = "casecal-build-"
+STALE_BUILD = 3600.0
+"""Seconds after which a build folder is a killed compile's leftover, not a running one."""
+
+
 def _build(cc: str, src: str, lib_path: Path) -> None:
     lib_path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=lib_path.parent) as tmp:
+    _sweep(lib_path.parent)
+    with tempfile.TemporaryDirectory(prefix=BUILD_PREFIX, dir=lib_path.parent) as tmp:
         c_file = Path(tmp, "kernel.c")
         c_file.write_text(src)
         so_file = Path(tmp, lib_path.name)
         subprocess.run(
             [cc, *CFLAGS, str(c_file), "-o", str(so_file), "-lm"], check=True, capture_output=True
         )
-        # rename is atomic: a concurrent process sees either no file or a whole one
+        data = so_file.read_bytes()
+        record = Path(tmp, "record.json")
+        record.write_text(
+            json.dumps({"size": len(data), "sha256": hashlib.sha256(data).hexdigest()})
+        )
+        # each rename is atomic: a concurrent process sees the old file or the new one
+        os.replace(record, _sidecar(lib_path))
         os.replace(so_file, lib_path)
     log.info("compiled %s", lib_path)
+
+
+def _sweep(folder: Path) -> None:
+    """Remove build folders older than `STALE_BUILD`: what killed compiles left."""
+    now = time.time()
+    for old in folder.glob(f"{BUILD_PREFIX}*"):
+        try:
+            if now - old.stat().st_mtime > STALE_BUILD:
+                shutil.rmtree(old, ignore_errors=True)
+        except OSError:
+            pass

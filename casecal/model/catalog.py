@@ -34,6 +34,7 @@ from importlib import resources
 from pathlib import Path
 
 from ..errors import CalibrationError
+from ..textio import read_text
 from .robot import Frame, Joint, Robot
 
 _LENGTH = {"m": 1.0, "mm": 1e-3}
@@ -94,9 +95,7 @@ def load_robot(name_or_path: str | Path) -> Robot:
     text = str(name_or_path)
     path = Path(text)
     if path.suffix == ".toml" or path.exists() or "/" in text or "\\" in text:
-        if not path.is_file():
-            raise CalibrationError(f"robot file {text!r} does not exist; check the path")
-        label, data_bytes = str(path), path.read_bytes()
+        label, source = str(path), read_text(path, "robot file")
     else:
         entry = _catalog_dir() / f"{text}.toml"
         if not entry.is_file():
@@ -104,10 +103,10 @@ def load_robot(name_or_path: str | Path) -> Robot:
                 f"unknown robot {text!r}; catalog robots are: {', '.join(robots())} "
                 "(or give the path of a .toml robot file)"
             )
-        label, data_bytes = f"catalog robot {text}", entry.read_bytes()
+        label, source = f"catalog robot {text}", read_text(entry, "robot file")
     try:
-        data = tomllib.loads(data_bytes.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        data = tomllib.loads(source)
+    except tomllib.TOMLDecodeError as exc:
         raise CalibrationError(f"{label}: not valid TOML ({exc}); fix the syntax") from None
     return robot_from_dict(data, label=label, default_name=path.stem)
 
@@ -226,11 +225,9 @@ def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:
     from .parameters import is_length
 
     label = str(path)
-    if not Path(path).is_file():
-        raise CalibrationError(f"deviations file {label!r} does not exist; check the path")
     try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        data = tomllib.loads(read_text(path, "deviations file"))
+    except tomllib.TOMLDecodeError as exc:
         raise CalibrationError(f"{label}: not valid TOML ({exc}); fix the syntax") from None
     length = _unit(data, "length_unit", _LENGTH, label)
     angle = _unit(data, "angle_unit", _ANGLE, label)
@@ -314,9 +311,21 @@ def _unit(data: dict, key: str, table: dict, label: str) -> float:
 def _number(value, label: str, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise CalibrationError(f"{label}: {where} = {value!r} is not a number; write a number")
-    if not math.isfinite(value):
-        raise CalibrationError(f"{label}: {where} = {value} is not finite; write a finite number")
-    return float(value)
+    try:
+        number = float(value)  # a 401-digit integer does not fit a float
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number) or (number != 0 and abs(number) > 1e12):
+        shown = (
+            f"{value:.6g}"
+            if isinstance(value, float)
+            else f"an integer of {len(str(abs(value)))} digits"
+        )
+        raise CalibrationError(
+            f"{label}: {where} = {shown} is not a size a robot has; write a finite number in "
+            "the file's units"
+        )
+    return number
 
 
 def _frame(data: dict, key: str, length: float, angle: float, label: str) -> Frame:

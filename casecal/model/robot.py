@@ -194,6 +194,24 @@ class Robot:
                 )
         return np.array(rows, dtype=float)
 
+    @property
+    def reach(self) -> float | None:
+        """An upper bound of the distance from the base frame to any measured point, m.
+
+        The sum of every link's |a| and |d|, a prismatic joint's largest travel, and the
+        tool and reflector offsets: no pose of the arm puts a point farther out. None for
+        a prismatic joint without limits.
+        """
+        total = float(np.linalg.norm(self.tool.xyz))
+        total += max((float(np.linalg.norm(p)) for p in self.points), default=0.0)
+        for j in self.joints:
+            total += abs(j.a) + abs(j.d)
+            if j.type == "P":
+                if j.limits is None:
+                    return None
+                total += max(abs(v) for v in j.limits)
+        return total
+
     # --- variants ---------------------------------------------------------------------
 
     def with_parameters(self, values: Mapping[str, float]) -> Robot:
