@@ -358,7 +358,8 @@ def _cmd_show(args: argparse.Namespace) -> None:
     deg, mm = 180.0 / math.pi, 1e3
     conv = "standard DH" if robot.convention == "dh" else "modified DH (Craig)"
     print(f"{robot.name}: {robot.full_name or robot.name}")
-    print(f"{robot.dof} joints ({robot.joint_types}), {conv}; lengths in mm, angles in degrees")
+    joints = "1 joint" if robot.dof == 1 else f"{robot.dof} joints"
+    print(f"{joints} ({robot.joint_types}), {conv}; lengths in mm, angles in degrees")
     print()
     print(
         f"{'joint':>5} {'type':>4} {'theta':>10} {'d':>10} {'a':>10} {'alpha':>10} "
@@ -428,8 +429,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
+    # -v also after the command (casecal validate ... -v); SUPPRESS keeps the top level's
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "-v", "--verbose", action="count", default=argparse.SUPPRESS, help=argparse.SUPPRESS
+    )
 
-    p = sub.add_parser(
+    def command(name, **kwargs):
+        return sub.add_parser(name, parents=[common], **kwargs)
+
+    p = command(
         "robots",
         help="list the robot catalog (name, dof, joint types, source)",
         description="List the robots in casecal's catalog.",
@@ -437,7 +446,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--wide", action="store_true", help="do not shorten the source column")
     p.set_defaults(func=_cmd_robots)
 
-    p = sub.add_parser(
+    p = command(
         "show",
         help="print a robot's DH table in mm and degrees",
         description="Print the DH table (theta, d, a, alpha, Hayati beta, joint limits) of a "
@@ -471,7 +480,7 @@ def build_parser() -> argparse.ArgumentParser:
         "parameters: names, families or 'all', comma-separated, e.g. "
         "'theta*,a*,d*' (default: the paper's theta, a, d; 'a*' never means alpha)"
     )
-    p = sub.add_parser(
+    p = command(
         "simulate",
         help="simulate position measurements of a robot with deviations",
         description="Simulate measured tool-point positions of a robot whose parameters "
@@ -494,7 +503,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="CSV", help="measurement file to write")
     p.set_defaults(func=_cmd_simulate)
 
-    p = sub.add_parser(
+    p = command(
         "identify",
         help="identify parameter deviations from a measurement CSV",
         description="Identify the parameter deviations of ROBOT from measured positions, print "
@@ -573,7 +582,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="TOML", help="write the calibrated robot here")
     p.set_defaults(func=_cmd_identify)
 
-    p = sub.add_parser(
+    p = command(
         "observability",
         help="what a pose set can identify, and what it cannot",
         description="Rank, identifiable and unidentifiable parameters, blind combinations in "
@@ -584,12 +593,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--parameters", default=None, help=params_help)
     p.set_defaults(func=_cmd_observability)
 
-    p = sub.add_parser(
+    p = command(
         "calibrate-until",
         help="use the fewest measured poses that reach an error threshold",
         description="From a pool of measured poses (CSV), take poses in batches (D-optimal "
         "given those already taken, the paper's order, or uniform), identify after each "
-        "batch, and stop when the predicted 95 %% position error on new poses is under the "
+        "batch, and stop when the predicted 95 % position error on new poses is under the "
         "threshold. Prints how many poses it took.",
     )
     p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path (nominal robot)")
@@ -609,7 +618,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="TOML", help="write the calibrated robot here")
     p.set_defaults(func=_cmd_calibrate_until)
 
-    p = sub.add_parser(
+    p = command(
         "validate",
         help="errors of a calibrated robot on held-out measurements",
         description="Refit only the frames (base, tool, reflectors: the instrument may have "
@@ -625,7 +634,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_validate)
 
-    p = sub.add_parser(
+    p = command(
         "report",
         help="run every study and write the PDF report, figures and tables",
         description="Run the studies (the paper's Table 1, planar arms, SCARA observability, "

@@ -219,3 +219,72 @@ def test_a_401_digit_number_is_one_line(tmp_path, capsys, where):
     code = main(argv)
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "401 digits" in err, err
+
+
+def test_the_report_folder_is_swapped_whole(tmp_path, monkeypatch):
+    from casecal.report import folder as pub
+
+    out = tmp_path / "reports"
+    out.mkdir()
+    (out / "README.md").write_text("kept")
+    (out / "old_figure.png").write_text("old")
+    (out / "casecal-report.pdf").write_text("old pdf")
+    folder = pub.building_folder(out)
+    assert folder.parent == out.parent and folder.name.startswith(".reports.building-")
+    (folder / "casecal-report.pdf").write_text("new pdf")
+    pub.publish(folder, out)
+    assert sorted(p.name for p in out.iterdir()) == ["README.md", "casecal-report.pdf"]
+    assert (out / "casecal-report.pdf").read_text() == "new pdf"
+    assert not list(tmp_path.glob(".reports.*"))
+    # without an atomic exchange, a kill between the two renames leaves the old report
+    # aside; the next run puts it back before anything else
+    monkeypatch.setattr(pub, "_exchange", lambda a, b: False)
+    old = tmp_path / ".reports.old-99999"
+    out.rename(old)
+    pub.building_folder(out)
+    assert (out / "casecal-report.pdf").read_text() == "new pdf" and not old.exists()
+
+
+@pytest.mark.slow
+def test_a_killed_report_leaves_the_old_one_whole(tmp_path):
+    out = tmp_path / "reports"
+    run = [
+        sys.executable,
+        "-m",
+        "casecal",
+        "report",
+        "--quick",
+        "--executor",
+        "serial",
+        "-o",
+        str(out),
+    ]
+    subprocess.run(run, check=True, capture_output=True)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    for delay in (3.0, 15.0):
+        proc = subprocess.Popen(run, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(delay)
+        proc.kill()
+        proc.wait()
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before, delay
+    subprocess.run(run, check=True, capture_output=True)  # and the next run cleans up
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".reports.")]
+    pdf = (out / "casecal-report.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF") and pdf.rstrip().endswith(b"%%EOF")
+
+
+def test_cli_nits(capsys, tmp_path):
+    with pytest.raises(SystemExit):
+        main(["calibrate-until", "--help"])
+    text = capsys.readouterr().out
+    assert "95 %" in text and "%%" not in text
+    assert main(["show", "r"]) == 0
+    assert "1 joint (R)" in capsys.readouterr().out
+    robot, meas = simple_session()
+    cc.write_csv(tmp_path / "m.csv", meas, robot)
+    (tmp_path / "cal.toml").write_text(
+        cc.robot_to_toml(robot).replace(
+            'name = "puma560"', 'name = "puma560"\ncalibrated_from = "puma560"'
+        )
+    )
+    assert main(["validate", str(tmp_path / "cal.toml"), str(tmp_path / "m.csv"), "-v"]) == 0

@@ -40,11 +40,12 @@ from ..model import kinematics
 from ..model.robot import Robot
 from .rank import chi2_quantile, held_matter
 
-OPTIMALITY = 0.05
+OPTIMALITY = 0.5
 """Largest cost decrease one more step may still promise, in noise variances: the fit is
-then within 0.3 standard errors (Mahalanobis distance √(2·0.05)) of the least-squares
-minimum, closer than the noise lets anyone tell. Iterated fits end far below it; the
-paper's one-shot step on small deviations too."""
+then within one standard error (Mahalanobis distance √(2·0.5)) of the least-squares
+minimum in every direction, which no one could tell from the minimum itself. Along a
+nearly blind direction the linearised promise is often not even realisable; fits that
+really stalled promise tens to thousands."""
 
 SIGMA_SLACK = 1.1
 """The stated σ may be this much too small before the residuals count as too large."""

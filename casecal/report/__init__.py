@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from .common import StudyResult, style
+from .folder import building_folder, publish
 from .pose_count import pose_count_sweep
 from .studies_beyond import enough_poses, optimal_poses, relative_measurements
 from .studies_paper import planar_arms, scara_observability, table1
@@ -109,9 +110,10 @@ def build_report(
     from .pdf import write_pdf
 
     out = Path(out)
+    folder = building_folder(out)  # swapped in whole at the end (casecal.report.folder)
     t0 = time.perf_counter()
     run = study_runner(executor, workers, scheduler, progress)
-    results = run_studies(list(STUDIES), out, quick, run, log)
+    results = run_studies(list(STUDIES), folder, quick, run, log)
     elapsed = time.perf_counter() - t0
     settings = [
         f"casecal {__version__}; Python {platform.python_version()}; CasADi {casadi.__version__}; "
@@ -136,8 +138,9 @@ def build_report(
         "Files beside this PDF: every figure as PNG and every table, including one row per",
         "Monte Carlo trial, as CSV.",
     ]
+    n = write_pdf(folder / "casecal-report.pdf", "casecal report", settings, results, PDF_TABLES)
+    publish(folder, out)
     pdf = out / "casecal-report.pdf"
-    n = write_pdf(pdf, "casecal report", settings, results, PDF_TABLES)
     if log:
         log(f"{n} figures; report written to {pdf}")
     return pdf
