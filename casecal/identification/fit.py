@@ -27,6 +27,7 @@ from functools import partial
 
 import numpy as np
 
+from .._threads import with_one_blas_thread
 from ..data.measurements import Measurements, broadcast_sigma
 from ..errors import CalibrationError
 from ..model.robot import Robot
@@ -48,6 +49,7 @@ DEFAULT_METHOD = "gauss-newton"
 """Iterated: it reaches the least-squares solution wherever the one-shot step does not."""
 
 
+@with_one_blas_thread
 def identify(
     robot: Robot,
     measurements: Measurements,

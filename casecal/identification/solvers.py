@@ -51,6 +51,22 @@ def _converged(predicted: float, cost: float, tolerance: float, floor: float) ->
     return predicted <= tolerance * cost + floor
 
 
+STALL = 1e-3
+"""A step that lowers the cost by less than this many residual variances changes nothing
+the noise would let anyone see: along a nearly blind, curved valley, damped steps can
+crawl like that for hundreds of iterations."""
+
+CLOSE = 0.05
+"""A stalled Gauss-Newton stops as converged when the next step promises less than this
+many residual variances (well within the audit's bar); otherwise LM takes over."""
+
+
+def _variance(problem: Problem, cost: float) -> float:
+    """The residual variance (in the cost's units) at `cost`: 2 cost / (rows - k)."""
+    dof = problem.w_flat.size - len(problem.names)
+    return 2.0 * cost / max(dof, 1)
+
+
 def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
     for it in range(1, max_iterations + 1):
@@ -70,6 +86,7 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
             small = np.linalg.norm(t * step * norms) <= tolerance * (
                 np.linalg.norm(x * norms) + tolerance
             )
+            stalled = cost - cost_new <= STALL * _variance(problem, cost_new)
             x, r, cost = x_new, r_new, cost_new
             history.append(cost)
             if callback is not None:
@@ -78,6 +95,9 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
                 return x, it, 4, history, None
             if small or done:
                 return x, it, 2, history, None
+            if stalled:  # crawling: converged if little is left, else let LM go on
+                near = predicted <= CLOSE * _variance(problem, cost)
+                return x, it, 2 if near else 3, history, None
         else:
             history.append(cost)
             return x, it, 2 if done else 3, history, None
@@ -89,7 +109,7 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callba
     J = problem.jacobian(x)
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
-    mu, nu = None, 2.0
+    mu, nu, stalls = None, 2.0, 0
     for it in range(1, max_iterations + 1):
         Js = J / norms  # work in scaled variables z = x * norms
         A = Js.T @ Js
@@ -97,7 +117,10 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callba
         # the undamped step's predicted decrease, from the normal equations: a
         # convergence test only, so their squared condition number does no harm
         h_gn = np.linalg.lstsq(A, g, rcond=1e-12)[0]
-        if _converged(0.5 * float(g @ h_gn), cost, tolerance, floor):
+        promised = 0.5 * float(g @ h_gn)
+        if _converged(promised, cost, tolerance, floor) or (
+            stalls and promised <= CLOSE * _variance(problem, cost)
+        ):
             # nothing measurable left to gain: take the undamped step if it helps, stop
             r_gn = problem.residual(x + h_gn / norms)
             if 0.5 * r_gn @ r_gn < cost:
@@ -115,13 +138,14 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callba
         rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
         small = np.linalg.norm(h) <= tolerance * (np.linalg.norm(x * norms) + tolerance)
         if rho > 0:
+            stalls = stalls + 1 if cost - cost_new <= STALL * _variance(problem, cost_new) else 0
             x, r, cost = x_new, r_new, cost_new
             history.append(cost)
             if callback is not None:
                 callback(it, cost)
             if cost <= floor:
                 return x, it, 4, history, None
-            if small:
+            if small or stalls >= 3:  # three steps in a row that change nothing visible
                 return x, it, 2, history, None
             J = problem.jacobian(x)
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
