@@ -34,30 +34,27 @@ PDF_TABLES = {"table1", "scara_blind_spots", "six_axis_observability"}
 
 
 def study_runner(executor: str = "processes", workers=None, scheduler=None, progress: bool = True):
-    """A function Grid -> DataFrame for the studies, with a progress bar on a terminal."""
-    from ..studies.engine import run_study
+    """The `Executor` the studies run their trials on, with a progress bar on a terminal."""
+    from ..studies.executor import Executor
 
-    def run(grid):
-        bar = None
-        if progress and sys.stderr.isatty():
+    bar = None
+
+    def tick(done, total):
+        nonlocal bar
+        if not (progress and sys.stderr.isatty()):
+            return
+        if bar is None or bar.total != total or done < bar.n:
             from tqdm import tqdm
 
-            bar = tqdm(total=1, unit="group", leave=False, desc=f"{grid.size} trials")
-
-        def tick(done, total):
-            if bar is not None:
-                bar.total = total
-                bar.update(done - bar.n)
-
-        try:
-            return run_study(
-                grid, executor=executor, workers=workers, scheduler=scheduler, progress=tick
-            )
-        finally:
             if bar is not None:
                 bar.close()
+            bar = tqdm(total=total, unit="task", leave=False)
+        bar.update(done - bar.n)
+        if done == total:
+            bar.close()
+            bar = None
 
-    return run
+    return Executor(executor, workers, scheduler, tick)
 
 
 def run_studies(names, out: Path, quick: bool, run, log=None) -> list[StudyResult]:

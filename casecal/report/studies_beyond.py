@@ -22,38 +22,48 @@ ORDER_COLORS = {"optimal": "#2ca02c", "uniform": COLORS["uniform"], "seed": COLO
 ORDER_LABEL = {"optimal": "D-optimal poses", "uniform": "uniform poses", "seed": "paper's schedule"}
 
 
+DESIGNS = ("optimal", "uniform")
+
+
+def _serial():
+    from ..studies.executor import Executor
+
+    return Executor("serial")
+
+
+def _design_trial(task) -> dict | None:
+    """One pose-design trial: `n` poses of one design for truth `t`, fitted, held-out error."""
+    t, n, design, sigma = task
+    robot = load_robot(ROBOT)
+    true = robot.with_deviations(truth_for(Grid(robots=(ROBOT,)), robot, t))
+    q_hold = poses.uniform(robot, 200, seed=99)
+    if design == "optimal":
+        q = poses.optimal(robot, n, seed=t)
+    else:
+        q = poses.uniform(robot, n, seed=derive_seed(0, "uni", n, t))
+    meas = simulate(true, q, noise=sigma, seed=derive_seed(0, "noise", n, t))
+    try:
+        cal = identify(robot, meas, None, "gauss-newton")
+    except CalibrationError:  # too few poses for this draw: data, not a crash
+        return None
+    e = cal.robot.position(q_hold) - true.position(q_hold)
+    return {
+        "design": design,
+        "n_poses": n,
+        "trial": t,
+        "success": cal.success,
+        "rms_holdout_mm": float(np.sqrt(np.mean(np.sum(e**2, 1)))) * 1e3,
+    }
+
+
 def optimal_poses(out: Path, quick: bool = False, run=None) -> StudyResult:
     """Held-out error of D-optimal against uniform poses, by pose count."""
     res = StudyResult("optimal_poses", "Which poses?")
-    robot = load_robot(ROBOT)
     sigma = 0.05e-3
     counts = (8, 15, 30) if quick else (6, 8, 12, 20, 30, 50)
     trials = 10 if quick else 30
-    q_hold = poses.uniform(robot, 200, seed=99)
-    rows = []
-    for t in range(trials):
-        true = robot.with_deviations(truth_for(Grid(robots=(ROBOT,)), robot, t))
-        p_hold = true.position(q_hold)
-        for n in counts:
-            designs = {
-                "optimal": poses.optimal(robot, n, seed=t),
-                "uniform": poses.uniform(robot, n, seed=derive_seed(0, "uni", n, t)),
-            }
-            for name, q in designs.items():
-                meas = simulate(true, q, noise=sigma, seed=derive_seed(0, "noise", n, t))
-                try:
-                    cal = identify(robot, meas, None, "gauss-newton")
-                except CalibrationError:  # too few poses for this draw: data, not a crash
-                    continue
-                e = cal.robot.position(q_hold) - p_hold
-                rows.append(
-                    {
-                        "design": name,
-                        "n_poses": n,
-                        "trial": t,
-                        "rms_holdout_mm": float(np.sqrt(np.mean(np.sum(e**2, 1)))) * 1e3,
-                    }
-                )
+    tasks = [(t, n, design, sigma) for t in range(trials) for n in counts for design in DESIGNS]
+    rows = [row for row in (run or _serial()).map(_design_trial, tasks) if row is not None]
     df = pd.DataFrame(rows)
     fig, ax = plt.subplots(figsize=(6.5, 3.4))
     means = df.groupby(["design", "n_poses"])["rms_holdout_mm"].mean().unstack(0)
@@ -89,34 +99,41 @@ def optimal_poses(out: Path, quick: bool = False, run=None) -> StudyResult:
     return res
 
 
+def _campaign(task) -> dict:
+    """One calibrate-until run: noise level, truth `t` and pose order."""
+    sigma_mm, t, order, threshold = task
+    robot = load_robot(ROBOT)
+    true = robot.with_deviations(truth_for(Grid(robots=(ROBOT,)), robot, t))
+
+    def measure(q):
+        return simulate(
+            true, q, noise=sigma_mm * 1e-3, seed=derive_seed(1, order, sigma_mm, t, len(q))
+        )
+
+    run_ = calibrate_until(robot, measure, threshold, order=order, max_poses=300, seed=t)
+    return {
+        "order": order,
+        "noise_mm": sigma_mm,
+        "trial": t,
+        "poses": run_.n_poses,
+        "reached": run_.reached,
+    }
+
+
 def enough_poses(out: Path, quick: bool = False, run=None) -> StudyResult:
     """How many poses each ordering needs before the predicted error is under 0.1 mm."""
     res = StudyResult("calibrate_until", "How many poses are enough?")
-    robot = load_robot(ROBOT)
     threshold = 0.1e-3
     levels = (0.02, 0.1) if quick else (0.01, 0.02, 0.05, 0.1)
     trials = 2 if quick else 4
-    rows = []
-    for sigma_mm in levels:
-        for t in range(trials):
-            true = robot.with_deviations(truth_for(Grid(robots=(ROBOT,)), robot, t))
-            for order in ("optimal", "uniform", "seed"):
-
-                def measure(q, true=true, s=sigma_mm * 1e-3, tag=(order, sigma_mm, t)):
-                    return simulate(true, q, noise=s, seed=derive_seed(1, *tag, len(q)))
-
-                run_ = calibrate_until(
-                    robot, measure, threshold, order=order, max_poses=300, seed=t
-                )
-                rows.append(
-                    {
-                        "order": order,
-                        "noise_mm": sigma_mm,
-                        "trial": t,
-                        "poses": run_.n_poses,
-                        "reached": run_.reached,
-                    }
-                )
+    tasks = [
+        (sigma_mm, t, order, threshold)
+        for sigma_mm in levels
+        for t in range(trials)
+        for order in ("optimal", "uniform", "seed")
+    ]
+    # the paper's order needs the most poses: start those first
+    rows = (run or _serial()).map(_campaign, tasks, cost=lambda task: task[2] == "seed")
     df = pd.DataFrame(rows)
     fig, ax = plt.subplots(figsize=(6.5, 3.4))
     med = df.groupby(["order", "noise_mm"])["poses"].median().unstack(0)

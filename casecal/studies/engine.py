@@ -19,7 +19,6 @@ its identifiability analysis are computed once per group and noise level (see
 from __future__ import annotations
 
 import logging
-import os
 import time
 import zlib
 from collections.abc import Callable, Sequence
@@ -35,6 +34,7 @@ from ..identification.analysis import observability
 from ..identification.fit import METHODS, identify
 from ..model.catalog import load_robot
 from ..model.parameters import is_length, select
+from .executor import Executor
 
 log = logging.getLogger(__name__)
 
@@ -243,7 +243,7 @@ def _groups(grid: Grid) -> list[list[Trial]]:
 
 def run_study(
     grid: Grid,
-    executor: str = "processes",
+    executor: str | Executor = "processes",
     workers: int | None = None,
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
@@ -253,15 +253,15 @@ def run_study(
     Parameters
     ----------
     grid : Grid
-    executor : {"processes", "serial", "dask"}
-        Local processes (default; `workers` of them, default the number of cores), one
-        process, or a dask.distributed cluster (``pip install casecal[distributed]``).
+    executor : {"processes", "serial", "dask"} or Executor
+        Where the trials run (`casecal.studies.executor.Executor`); an Executor carries
+        its own workers, scheduler and progress.
     workers : int, optional
     scheduler : str or dask Client, optional
         For ``"dask"``: a scheduler address (``"tcp://host:8786"``) or a Client; None
         starts a LocalCluster.
     progress : callable(done, total), optional
-        Called after each group of trials finishes (the core itself never prints).
+        Called after each batch of trials finishes (the core itself never prints).
 
     Returns
     -------
@@ -271,67 +271,21 @@ def run_study(
         rms_holdout_mm, rms_holdout_before_mm, max_abs_rel_error, and per parameter
         true_*, dev_*, se_* (SI) and err_* (relative error). Rows in `trials` order.
     """
-    groups = _groups(grid)
-    done = 0
-    results: list[list[dict]] = [None] * len(groups)
-
-    def tick():
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, len(groups))
-
-    if executor == "serial" or (executor == "processes" and (workers or os.cpu_count() or 1) == 1):
-        for i, g in enumerate(groups):
-            results[i] = run_group(grid, g)
-            tick()
-    elif executor == "processes":
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        # bigger groups first: better load balance on few cores
-        order = sorted(range(len(groups)), key=lambda i: -groups[i][0].n_poses * len(groups[i]))
-        with ProcessPoolExecutor(max_workers=workers or os.cpu_count()) as pool:
-            futures = {pool.submit(run_group, grid, groups[i]): i for i in order}
-            for fut in as_completed(futures):
-                results[futures[fut]] = fut.result()
-                tick()
-    elif executor == "dask":
-        results = _run_dask(grid, groups, scheduler, tick)
-    else:
-        raise CalibrationError(f"unknown executor {executor!r}; use processes, serial or dask")
-    rows = [row for group in results for row in group]
-    return pd.DataFrame(rows)
+    if not isinstance(executor, Executor):
+        executor = Executor(executor, workers, scheduler, progress)
+    # trials of one robot, schedule and pose count share their poses; batches of them, about
+    # four per worker in all, keep every worker busy however few groups the grid has
+    size = max(1, -(-grid.size // (4 * executor.n_workers)))
+    batches = [
+        (grid, group[i : i + size]) for group in _groups(grid) for i in range(0, len(group), size)
+    ]
+    results = executor.map(_run_batch, batches, cost=lambda b: b[1][0].n_poses * len(b[1]))
+    return pd.DataFrame([row for batch in results for row in batch])
 
 
-def _run_dask(grid, groups, scheduler, tick):
-    try:
-        from dask.distributed import Client, LocalCluster, as_completed
-    except ImportError:
-        raise CalibrationError(
-            "the dask executor needs dask.distributed: pip install 'casecal[distributed]'"
-        ) from None
-    own = None
-    if scheduler is None:
-        own = LocalCluster(n_workers=os.cpu_count() or 1, threads_per_worker=1)
-        client = Client(own)
-    elif isinstance(scheduler, str):
-        client = Client(scheduler)
-    else:
-        client = scheduler
-    try:
-        futures = [client.submit(run_group, grid, g, pure=False) for g in groups]
-        index = {f.key: i for i, f in enumerate(futures)}
-        results: list = [None] * len(groups)
-        for fut in as_completed(futures):
-            results[index[fut.key]] = fut.result()
-            tick()
-        return results
-    finally:
-        if own is not None:
-            client.close()
-            own.close()
-        elif isinstance(scheduler, str):
-            client.close()
+def _run_batch(task) -> list[dict]:
+    grid, batch = task
+    return run_group(grid, batch)
 
 
 def summarise(df: pd.DataFrame, by: Sequence[str], value: str) -> pd.DataFrame:
