@@ -317,8 +317,14 @@ def _check_writable_dir(path) -> None:
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise CalibrationError(f"{str(p)!r} is a file, not a folder; choose another output")
+    if not p.exists() and not p.absolute().parent.is_dir():
+        # one new folder is what was asked for; more is a mistyped path
+        raise CalibrationError(
+            f"cannot create output folder {str(p)!r}: {str(p.absolute().parent)!r} does not "
+            "exist either (check the path, or create the folders first)"
+        )
     try:
-        p.mkdir(parents=True, exist_ok=True)
+        p.mkdir(exist_ok=True)
     except OSError as exc:
         raise CalibrationError(f"cannot create output folder {str(p)!r}: {exc.strerror}") from None
     if not os.access(p, os.W_OK):

@@ -99,3 +99,33 @@ def test_cli_pairs_rejects_options_it_cannot_honour(tmp_path, kr15, capsys):
     assert main([*argv, "--holdout", "0.2", "--loss", "huber"]) == 2
     err = capsys.readouterr().err
     assert "--holdout" in err and "--loss" in err and err.count("\n") == 1
+
+
+def aligned_rms(a: np.ndarray, b: np.ndarray) -> float:
+    """RMS distance (m) of point sets after the best rigid motion: distances see no frame."""
+    a, b = a - a.mean(0), b - b.mean(0)
+    U, _, Vt = np.linalg.svd(a.T @ b)
+    R = U @ np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    return float(np.sqrt(np.mean(np.sum((a @ R - b) ** 2, axis=1))))
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-5])
+def test_a_tool_off_the_wrist_axes_is_found_in_a_later_round(noise):
+    """The wrist is blind at a nominal tool on the flange axis and visible at the true one
+    (50 mm out): one linearisation stopped at 0.86 mm RMS, 1.2 mm held-out, "success"."""
+    robot = cc.load_robot("puma560")
+    rng = np.random.default_rng(0)
+    dev = {
+        n: rng.normal() * (np.radians(0.3) if n.startswith(("theta", "alpha", "beta")) else 1e-3)
+        for n in robot.parameters
+        if not n.startswith(("base_", "tool_"))
+    }
+    true = robot.with_deviations({**dev, "tool_x": 0.01, "tool_z": 0.05})
+    q = cc.poses.uniform(robot, 100, seed=0)
+    m = simulate_distances(true, q, random_pairs(100, 300, seed=0), noise=noise, seed=1)
+    cal = identify_distances(robot, m, "all")
+    assert cal.success, cal.message
+    assert cal.rounds >= 2 and "theta5" in cal.joined
+    q_new = cc.poses.uniform(robot, 300, seed=99)
+    held_out = aligned_rms(cal.robot.position(q_new), true.position(q_new))
+    assert held_out < (1e-9 if not noise else 1e-5)  # m

@@ -288,3 +288,15 @@ def test_cli_nits(capsys, tmp_path):
         )
     )
     assert main(["validate", str(tmp_path / "cal.toml"), str(tmp_path / "m.csv"), "-v"]) == 0
+
+
+def test_outputs_create_one_missing_folder_not_a_mistyped_tree(tmp_path, capsys):
+    robot, meas = simple_session()
+    cc.write_csv(tmp_path / "m.csv", meas, robot)
+    deep = tmp_path / "typo" / "deeper" / "cal.toml"
+    assert main(["identify", "puma560", str(tmp_path / "m.csv"), "-o", str(deep)]) == 2
+    assert "does not exist either" in capsys.readouterr().err
+    assert not (tmp_path / "typo").exists()
+    one = tmp_path / "new" / "cal.toml"
+    assert main(["identify", "puma560", str(tmp_path / "m.csv"), "-o", str(one)]) == 0
+    assert one.is_file()

@@ -29,7 +29,20 @@ def broadcast_sigma(sigma, n: int) -> np.ndarray:
         ) from None
     if not np.all(np.isfinite(out)) or np.any(out < 0):
         raise CalibrationError("noise sigma must be finite and non-negative (m)")
+    stated = out[out > 0]
+    lo, hi = SIGMA_RANGE  # defined below: read at call time
+    if stated.size and (stated.min() < lo or stated.max() > hi):
+        bad = stated.min() if stated.min() < lo else stated.max()
+        raise CalibrationError(
+            f"noise sigma {bad:.3g} m is outside 1 nm … 1 m, the range of position "
+            "instruments: check its unit (the API takes m, files and the command line mm); "
+            "give 0 for noise-free or unknown noise"
+        )
     return out
+
+
+SIGMA_RANGE = (1e-9, 1.0)
+"""Stated noise σ (m) outside this range is a unit mistake, not an instrument: 1 nm … 1 m."""
 
 
 @dataclass(frozen=True)

@@ -9,14 +9,16 @@ failure with its reason:
   ``"svd"`` without a stated σ, one that would move the fit by less than
   `RESOLUTION` RMS (its linearisation error is below what any instrument resolves);
 - **residual did not grow**: the fit is no worse than where it started;
-- **residual consistent with the noise**: with a stated σ, the reduced χ² is within the
+- **residual consistent with the noise**: some coordinates are left over to check the fit
+  with (residual degrees of freedom); with a stated σ, the reduced χ² is within the
   99.9 % bound of chance, allowing σ to be 10 % low; without one, the RMS residual is
   within what any position instrument's noise explains (`PLAUSIBLE_NOISE`); either way,
   the residuals are not smooth in the joint values (`smoothness`): noise differs from one
   pose to the next, a model error does not;
 - **prediction**: the error the covariance predicts on new poses within the joint limits
-  is not larger than the error the robot had before calibration, and no parameter had to
-  be held because its uncertainty alone would exceed that error (what the other
+  is not larger than the error the robot had before calibration, no parameter had to
+  be held because its uncertainty alone would exceed that error, and none is blind at
+  the measured poses that poses across the joint ranges would see (what the other
   estimates absorbed of it then holds only on poses like the measured ones): poses that
   cannot support the parameters make the robot worse elsewhere, and say so here;
 - **held parameters do not matter**: freeing the parameters held because the data did not
@@ -24,6 +26,9 @@ failure with its reason:
   `casecal.identification.rank.held_matter`, in noise variances or, without σ, residual
   variances): otherwise the data do see them, and what looked like noise is a parameter
   missing from the fit;
+- **parameters not asked for do not matter**: the same test for the robot's parameters
+  outside the asked-for set (`casecal.identification.evidence.outside_gain`): a deviation
+  of one of them, absorbed by the estimates, is a confident wrong robot;
 - **identifiable set settled**: the rounds of `casecal.identification.rounds` stopped
   changing which parameters they estimate.
 """
@@ -68,6 +73,26 @@ SMOOTH = 0.5
 
 SMOOTHNESS_POSES = 2000
 
+NEGLIGIBLE_RMS = 1e-10
+"""RMS residual (m) below which, with no σ stated, a fit counts as converged whatever one
+more step promises: a tenth of a nanometre, below anything an instrument resolves."""
+
+
+def listed(names, most: int = 8) -> str:
+    """``"a, b, c"``; past `most` names, the first ones and how many in all."""
+    names = list(names)
+    if len(names) <= most:
+        return ", ".join(names)
+    return f"{', '.join(names[:most])} … ({len(names)} in all)"
+
+
+CAUSES = (
+    "no bound decides an estimate",
+    "parameters not asked for do not matter",
+    "held parameters do not matter",
+    "prediction no worse than uncalibrated",
+)
+
 
 @dataclass(frozen=True)
 class Check:
@@ -103,7 +128,10 @@ class Audit:
 
     @property
     def failures(self) -> tuple[Check, ...]:
-        return tuple(c for c in self.checks if c.passed is False)
+        """The failed checks, causes first: a parameter missing or unsupported explains a
+        residual too large for the noise or a fit that stalled, not the other way round."""
+        failed = [c for c in self.checks if c.passed is False]
+        return tuple(sorted(failed, key=lambda c: c.name not in CAUSES))
 
     def lines(self) -> list[str]:
         """One line per check: ``ok``, ``FAIL`` or ``n/a``, the check, what was measured."""
@@ -132,12 +160,27 @@ class Facts:
     rounds: int
     predicted_rms: float | None
     n_points: int = 1
+    n_estimated: int = 0
     one_shot: bool = False
     unsupported: tuple[str, ...] = ()
     held_gain: float = 0.0
     held: tuple[str, ...] = ()
     smoothness: float | None = None
     prediction_note: str = ""
+    blind_here: tuple[str, ...] = ()
+    still: tuple[str, ...] = ()
+    outside_gain: float = 0.0
+    outside_visible: int = 0
+    outside_leading: tuple[str, ...] = ()
+    inliers: tuple[float, int, float, int] | None = None
+    """Robust losses: (cost, dof, RMS) of the poses not listed as outliers, and how many
+    were listed; the noise check judges those, as the loss did."""
+    n_prior: int = 0
+    """Prior pseudo-observations among the rows (their cost is in `cost_final`)."""
+    bounds: tuple[str, ...] | None = None
+    """Estimated parameters on one of their bounds (None when no bounds were given)."""
+    bound_gain: float = 0.0
+    """Cost decrease freeing those from their bounds would add to the free ones'."""
 
 
 def audit(f: Facts) -> Audit:
@@ -149,6 +192,8 @@ def audit(f: Facts) -> Audit:
             _noise(f),
             _prediction(f),
             _held(f),
+            _outside(f),
+            *([_bounds(f)] if f.bounds is not None else []),
             Check(
                 "identifiable set settled",
                 f.settled,
@@ -180,10 +225,23 @@ def _converged(f: Facts) -> Check:
             f"(one-shot method, no σ: limit {RESOLUTION * 1e3:g} mm, an instrument's resolution)"
         )
     ok = f.predicted_decrease <= limit
+    if not ok and not f.known and f.rms_final <= NEGLIGIBLE_RMS:
+        ok, text = (
+            True,
+            (
+                f"RMS residual {f.rms_final * 1e3:.2g} mm, below anything measurable "
+                f"({NEGLIGIBLE_RMS * 1e3:g} mm)"
+            ),
+        )
     if not ok:
         text += (
             ": the fit stopped before the minimum (a nearly flat valley: more iterations "
-            "with --max-iterations, or more, better-spread poses)"
+            "with --max-iterations, or more, better-spread poses"
+            + (
+                "; or bounds the data push against, which IPOPT approaches slowly: widen them)"
+                if f.bounds is not None
+                else ")"
+            )
         )
     return Check("converged", ok, text)
 
@@ -201,21 +259,33 @@ def _no_growth(f: Facts) -> Check:
 
 def _noise(f: Facts) -> Check:
     name = "residual consistent with the noise"
+    if f.dof <= 0:
+        return Check(
+            name,
+            False,
+            f"{f.dof + f.n_estimated} measured coordinates for {f.n_estimated} estimates "
+            "leave no residual degrees of freedom: any values fit these data exactly, and "
+            "nothing checks them (measure more poses)",
+        )
+    cost, dof, rms, excluded = f.inliers or (f.cost_final, f.dof, f.rms_final, 0)
+    without = f" without the {excluded} outlying poses" if excluded else ""
     if f.known:
-        if f.dof <= 0:
-            return Check(name, None, "no residual degrees of freedom")
-        chi2 = 2.0 * f.cost_final / f.dof
-        bound = SIGMA_SLACK**2 * chi2_quantile(CHI2_LEVEL, f.dof) / f.dof
+        chi2 = 2.0 * cost / dof
+        bound = SIGMA_SLACK**2 * chi2_quantile(CHI2_LEVEL, dof) / dof
         ok = chi2 <= bound
-        text = f"reduced χ² = {chi2:.3g} (bound {bound:.3g}; residuals {np.sqrt(chi2):.3g}× σ)"
+        text = (
+            f"reduced χ²{without} = {chi2:.3g} (bound {bound:.3g}; residuals "
+            f"{np.sqrt(chi2):.3g}× σ)"
+        )
         if not ok:
             text += (
                 ": the model does not fit these data to their noise (a parameter missing "
-                "from the set, a wrong frame, outliers, or a σ that is too small)"
+                "from the set, a wrong frame, outliers, a prior the data contradict, or a σ "
+                "that is too small)"
             )
     else:
-        ok = f.rms_final <= PLAUSIBLE_NOISE
-        text = f"no σ stated; RMS residual {f.rms_final * 1e3:.4g} mm"
+        ok = rms <= PLAUSIBLE_NOISE
+        text = f"no σ stated; RMS residual{without} {rms * 1e3:.4g} mm"
         if not ok:
             text += (
                 f", more than any position instrument's noise ({PLAUSIBLE_NOISE * 1e3:g} mm): "
@@ -241,8 +311,10 @@ def smoothness(q: np.ndarray, residuals: np.ndarray, seed: int = 0) -> float | N
     For each pose, the nearest other pose in joint space (joints scaled to the range they
     span in the data); the mean squared difference of their residual vectors over twice
     the mean squared residual. About 1 for noise, which is independent from pose to pose;
-    near 0 for a model error, which changes smoothly with the joint values. None for fewer
-    than 12 poses. At most `SMOOTHNESS_POSES` poses (a fixed random subset) are compared.
+    near 0 for a model error, which changes smoothly with the joint values. Exact repeats
+    of a pose are not neighbours (a file's duplicated rows would read as smooth). None for
+    fewer than 12 poses with a distinct neighbour. At most `SMOOTHNESS_POSES` poses (a
+    fixed random subset) are compared.
 
     Parameters
     ----------
@@ -260,29 +332,90 @@ def smoothness(q: np.ndarray, residuals: np.ndarray, seed: int = 0) -> float | N
     span = np.ptp(q, axis=0)
     z = (q - q.min(axis=0)) / np.where(span > 0, span, 1.0)
     d = np.sum((z[:, None, :] - z[None, :, :]) ** 2, axis=2)
-    np.fill_diagonal(d, np.inf)
+    d[d == 0] = np.inf  # itself, and repeated rows of a file: a copy is no neighbour
     nearest = np.argmin(d, axis=1)
-    total = 2.0 * np.mean(np.sum(r**2, axis=1))
+    has = np.isfinite(d[np.arange(n), nearest])
+    total = 2.0 * np.mean(np.sum(r[has] ** 2, axis=1)) if has.sum() >= 12 else 0.0
     if total == 0:
         return None
-    return float(np.mean(np.sum((r - r[nearest]) ** 2, axis=1)) / total)
+    return float(np.mean(np.sum((r[has] - r[nearest[has]]) ** 2, axis=1)) / total)
 
 
 def _held(f: Facts) -> Check:
     name = "held parameters do not matter"
     if not f.held:
         return Check(name, None, "none held for the noise")
-    scale = 1.0 if f.known else (2.0 * f.cost_final / f.dof if f.dof > 0 else 1.0)
-    matter, gain, bound = held_matter(f.held_gain, len(f.held), scale)
+    matter, statistic, bound = held_matter(f.held_gain, len(f.held), f.cost_final, f.dof, f.known)
     ok = not matter or f.cost_final <= f.floor
-    text = (
-        f"freeing {', '.join(f.held)} would lower the cost by {gain / 2:.3g} "
-        f"{'noise' if f.known else 'residual'} variances (chance: up to {bound / 2:.3g})"
-    )
+    if f.known:
+        text = (
+            f"freeing {listed(f.held)} would lower the cost by {statistic / 2:.3g} noise "
+            f"variances (chance: up to {bound / 2:.3g})"
+        )
+    else:
+        text = (
+            f"freeing {listed(f.held)} would explain {statistic:.3g}× more per parameter "
+            f"than what remains (chance: up to {bound:.3g})"
+        )
     if not ok:
         text += (
-            ": the data do see them; the residuals are a missing parameter, not noise "
-            "(state the measurement σ, or measure better-spread poses)"
+            ": the data do see them; the residuals are a missing parameter, not noise ("
+            + ("" if f.known else "state the measurement σ, or ")
+            + "measure more, better-spread poses, so that they are determined)"
+        )
+    return Check(name, ok, text)
+
+
+def _outside(f: Facts) -> Check:
+    name = "parameters not asked for do not matter"
+    if not f.outside_visible:
+        return Check(name, None, "none outside the asked-for set moves the measured points")
+    matter, statistic, bound = held_matter(
+        f.outside_gain, f.outside_visible, f.cost_final, f.dof, f.known
+    )
+    ok = not matter or f.cost_final <= f.floor
+    lead = ", ".join(f.outside_leading)
+    which = f" (most: {lead})" if not ok else ""
+    if f.known:
+        text = (
+            f"freeing the {f.outside_visible} directions they add{which} would lower the "
+            f"cost by {statistic / 2:.3g} noise variances (chance: up to {bound / 2:.3g})"
+        )
+    else:
+        text = (
+            f"freeing the {f.outside_visible} directions they add{which} would explain "
+            f"{statistic:.3g}× more per direction than what remains (chance: up to "
+            f"{bound:.3g})"
+        )
+    if not ok:
+        text += (
+            ": the data see deviations of parameters that were not asked for, and the "
+            f"estimates absorbed them (add {lead} to --parameters, or ask for all)"
+        )
+    return Check(name, ok, text)
+
+
+def _bounds(f: Facts) -> Check:
+    name = "no bound decides an estimate"
+    if not f.bounds:
+        return Check(name, True, "no estimate sits on its bounds")
+    matter, statistic, bound = held_matter(
+        f.bound_gain, len(f.bounds), f.cost_final, f.dof, f.known
+    )
+    unit = "noise variances" if f.known else "per parameter, in residual variances"
+    gain = statistic / 2 if f.known else statistic
+    one = len(f.bounds) == 1
+    text = (
+        f"{listed(f.bounds)} {'sits on its' if one else 'sit on their'} bounds; freeing "
+        f"{'it' if one else 'them'} would lower the cost by {gain:.3g} {unit} (chance: up "
+        f"to {bound / 2 if f.known else bound:.3g})"
+    )
+    ok = not matter or f.cost_final <= f.floor
+    if not ok:
+        text += (
+            ": the data want them beyond, so the bounds, not the data, set them, and the "
+            "other estimates absorbed the rest (widen the bounds, or look for what else "
+            "is wrong: the model, the nominal values, the frame)"
         )
     return Check(name, ok, text)
 
@@ -293,11 +426,23 @@ def _prediction(f: Facts) -> Check:
         return Check(
             name,
             False,
-            f"these poses cannot determine {', '.join(f.unsupported)} (their uncertainty "
+            f"these poses cannot determine {listed(f.unsupported)} (their uncertainty "
             f"would exceed the uncalibrated error of {f.rms_start * 1e3:.3g} mm on poses "
             "across the workspace); held at nominal, but what the other estimates absorbed "
             "of them holds only on poses like the measured ones (measure more, "
             "better-spread poses, or ask for fewer parameters)",
+        )
+    if f.blind_here:
+        still = f" ({', '.join(f.still)} in every pose)" if f.still else ""
+        return Check(
+            name,
+            False,
+            f"these poses cannot tell {listed(f.blind_here)} from the estimated "
+            f"parameters{still}, but poses across the joint ranges would: the estimates "
+            "absorb their deviations, and the calibrated robot is right only on poses like "
+            "the measured ones (measure poses that move every joint, each independently of "
+            "the others; or, if the robot will only work at poses like these, leave these "
+            "parameters out of --parameters)",
         )
     if f.predicted_rms is None:
         return Check(name, None, f.prediction_note or "no joint limits to draw poses from")

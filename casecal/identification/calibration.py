@@ -116,9 +116,13 @@ class Calibration:
     pose_blind : tuple of str
         Held parameters that are blind at these poses only: poses across the joint
         ranges would tell them apart. The calibrated robot is then right on poses like
-        the measured ones, and elsewhere shows these parameters' own (unknown) deviations.
+        the measured ones, and elsewhere shows these parameters' own (unknown) deviations;
+        the answer audit fails such a fit.
     still_joints : tuple of str
         Joints that barely move in the data (under 1° or 1 mm), with their value.
+    measured : {"points", "distances"}
+        What the residuals are: measured points (N·m rows of x, y, z) or distances between
+        pairs of poses (one row each).
     """
 
     method: str
@@ -153,6 +157,7 @@ class Calibration:
     joined: tuple[str, ...] = ()
     pose_blind: tuple[str, ...] = ()
     still_joints: tuple[str, ...] = ()
+    measured: str = "points"
 
     @property
     def success(self) -> bool:

@@ -20,10 +20,12 @@ from ..design.poses import rng_from
 from ..errors import CalibrationError
 from ..model.robot import Robot, check_joint_values
 from .analysis import analyse, represent, selection
-from .audit import Facts, audit
+from .audit import Facts, audit, smoothness
 from .calibration import Calibration
-from .fit import METHODS, verdict
+from .evidence import outside_gain
+from .fit import METHODS, check_iterations, verdict
 from .linalg import gauss_newton_step
+from .rounds import MAX_ROUNDS
 from .solvers import ROUNDING, SOLVERS, floor_cost
 from .uncertainty import uncertainty
 
@@ -205,76 +207,139 @@ def identify_distances(
         )
     known = bool(np.all(measurements.sigma > 0))
     w = 1.0 / measurements.sigma if known else np.ones(measurements.n_pairs)
-    if (
-        isinstance(max_iterations, bool)
-        or not isinstance(max_iterations, int)
-        or max_iterations < 1
-    ):
-        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if not (isinstance(tolerance, int | float) and 0 < tolerance < 1):
-        raise CalibrationError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
+    max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     full = _DistanceProblem(robot, measurements, w, names)
     obs = analyse(full.jacobian(np.zeros(len(names))), names, measurements.n_pairs)
-    estimated = obs.base_parameters
     if obs.rank >= measurements.n_pairs and len(names) > obs.rank:
         raise CalibrationError(
             f"{measurements.n_pairs} distances are fewer than the {len(names)} parameters asked "
             "for, so they cannot tell which are blind; measure more pairs"
         )
-    if not estimated:
+    if not obs.base_parameters:
         raise CalibrationError("none of the asked-for parameters changes a measured distance")
-    problem = full.restricted(estimated)
-    x, iterations, status, history, message = SOLVERS[method](
-        problem, np.zeros(len(estimated)), max_iterations=max_iterations, tolerance=tolerance
-    )
-    calibrated = problem._robot(x)
-    r, J = problem.residual(x), problem.jacobian(x)
+    fit = _fit_in_rounds(robot, measurements, w, names, obs, method, max_iterations, tolerance)
+    problem = _DistanceProblem(fit.robot, measurements, w, fit.estimated)
+    x0 = np.zeros(len(fit.estimated))
+    r, J = problem.residual(x0), problem.jacobian(x0)
     r0 = full.residual(np.zeros(len(names)))
-    cov, se = uncertainty(J, r, known, names, estimated)
-    deviations = dict.fromkeys(names, 0.0)
-    deviations.update(zip(estimated, x.tolist(), strict=True))
+    cov, se = uncertainty(J, r, known, names, fit.estimated)
+    deviations = {n: fit.robot.parameters[n] - robot.parameters[n] for n in names}
+    outside = [n for n in robot.parameter_names if n not in names]
+    unasked = outside_gain(
+        _DistanceProblem(fit.robot, measurements, w, [*fit.estimated, *outside]), fit.estimated
+    )
+    q_pairs = np.hstack(
+        [measurements.q[measurements.pairs[:, 0]], measurements.q[measurements.pairs[:, 1]]]
+    )
     checks = audit(
         Facts(
-            solver_status=status,
-            solver_message=message,
+            solver_status=fit.status,
+            solver_message=fit.message,
             cost_start=0.5 * float(r0 @ r0),
             cost_final=0.5 * float(r @ r),
             floor=floor_cost(problem, ROUNDING),
             predicted_decrease=gauss_newton_step(J, r)[1],
             known=known,
-            dof=r.size - len(estimated),
+            dof=r.size - len(fit.estimated),
             rms_start=float(np.sqrt(np.mean((r0 / w) ** 2))),
             rms_final=float(np.sqrt(np.mean((r / w) ** 2))),
-            settled=True,
-            rounds=1,
+            settled=fit.settled,
+            rounds=fit.rounds,
             predicted_rms=None,
             prediction_note="distances: no frame in which to predict positions",
             one_shot=method == "svd",
             n_points=r.size,
+            n_estimated=len(fit.estimated),
+            smoothness=smoothness(q_pairs, r / w),
+            outside_gain=unasked.gain,
+            outside_visible=unasked.n_visible,
+            outside_leading=unasked.leading,
         )
     )
-    solver_status = status
-    status, message = verdict(checks, solver_status, message)
+    status, message = verdict(checks, fit.status, fit.message)
+    at_end = _DistanceProblem(fit.robot, measurements, w, names)
     cal = Calibration(
         method=method,
         nominal=robot,
-        robot=calibrated,
+        robot=fit.robot,
         parameters=tuple(names),
-        estimated=tuple(estimated),
+        estimated=tuple(fit.estimated),
         deviations=deviations,
         standard_errors=se,
         covariance=cov,
         residuals=(r / w)[:, None],
         residuals_before=(r0 / w)[:, None],
-        iterations=iterations,
+        iterations=fit.iterations,
         status=status,
         message=message,
-        history=tuple(float(h) for h in history),
-        observability=obs,
+        history=fit.history,
+        observability=fit.end_analysis,
         sigma_known=known,
         wall_time=time.perf_counter() - t0,
         audit=checks,
-        solver_status=solver_status,
-        representation=represent(full.jacobian(np.zeros(len(names))), names, estimated),
+        solver_status=fit.status,
+        representation=represent(at_end.jacobian(np.zeros(len(names))), names, fit.estimated),
+        start_observability=obs,
+        rounds=fit.rounds,
+        joined=tuple(n for n in fit.estimated if n not in obs.base_parameters),
+        measured="distances",
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+@dataclass(frozen=True)
+class _Rounds:
+    robot: Robot
+    estimated: tuple[str, ...]
+    status: int
+    message: str | None
+    iterations: int
+    history: tuple[float, ...]
+    rounds: int
+    settled: bool
+    end_analysis: object
+
+
+def _fit_in_rounds(robot, measurements, w, names, obs, method, max_iterations, tolerance):
+    """Fit the base set; where the fit ended, add what has become visible, and fit again.
+
+    The rounds of `casecal.identification.rounds` without its noise-aware rank: a tool
+    point off the wrist axes makes the wrist angles visible only once it has been fitted.
+    A parameter blind where the fit ended keeps the value it was fitted to while visible.
+    """
+    point, estimated = robot, list(obs.base_parameters)
+    iterations, history, settled, status, message = 0, [], False, 0, None
+    end, rounds, seen = obs, 0, set()
+    while rounds < MAX_ROUNDS:
+        rounds += 1
+        problem = _DistanceProblem(point, measurements, w, estimated)
+        x, its, status, hist, message = SOLVERS[method](
+            problem, np.zeros(len(estimated)), max_iterations=max_iterations, tolerance=tolerance
+        )
+        point, iterations = problem._robot(x), iterations + its
+        history += list(hist) if not history else list(hist[1:])
+        if method == "svd" or status < 0:
+            settled = True
+            break
+        at = _DistanceProblem(point, measurements, w, names)
+        end = analyse(
+            at.jacobian(np.zeros(len(names))), names, measurements.n_pairs, prefer=estimated
+        )
+        base = [n for n in names if n in end.base_parameters]
+        if set(base) <= set(estimated) or frozenset(base) in seen:
+            settled = set(base) <= set(estimated)
+            estimated = [n for n in estimated if n in base] if settled else estimated
+            break
+        seen.add(frozenset(base))
+        estimated = base
+    return _Rounds(
+        point,
+        tuple(estimated),
+        status,
+        message,
+        iterations,
+        tuple(float(h) for h in history),
+        rounds,
+        settled,
+        end,
+    )

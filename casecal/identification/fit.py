@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import time
 from functools import partial
+from numbers import Integral, Real
 
 import numpy as np
 
@@ -31,16 +32,14 @@ from .._threads import with_one_blas_thread
 from ..data.measurements import Measurements, broadcast_sigma
 from ..errors import CalibrationError
 from ..model.robot import Robot
-from .analysis import analyse, represent, selection
-from .audit import Facts, audit, predicted_rms, smoothness
+from .analysis import represent, selection
+from .audit import audit
 from .calibration import STATUS_MESSAGES, Calibration
-from .linalg import gauss_newton_step
+from .facts import gather, point_rms
 from .problem import Problem
-from .rank import held_gain
-from .rounds import LOSSES, Settings, fit_in_rounds, workspace_jacobian, workspace_poses
-from .solvers import ROUNDING, SOLVERS, floor_cost
+from .rounds import LOSSES, Settings, fit_in_rounds
+from .solvers import SOLVERS
 from .start import choose_frame, partial_base_start
-from .uncertainty import uncertainty
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +106,10 @@ def identify(
     loss : {"linear", "huber", "soft_l1"}
         ``"linear"`` is least squares. The robust losses down-weight measured points whose
         residual norm e exceeds `loss_scale` (Huber: weight c/e beyond c; soft-L1:
-        1/√(1 + (e/c)²)), by iteratively reweighted least squares around `method`.
+        1/√(1 + (e/c)²)), by iteratively reweighted least squares around `method`; the
+        poses that then stand out (`Calibration.outliers`) are left out and the rest
+        fitted by least squares, so that standard errors and the audit's noise check hold
+        (a bounded influence is still a bias).
     loss_scale : float
         c: in units of the measurement σ when σ is given (default 3 σ), otherwise in units
         of the residuals' robust standard deviation (from their median).
@@ -126,7 +128,8 @@ def identify(
         coordinates than parameters to estimate, bounds or prior for a method without them.
     """
     t_start = time.perf_counter()
-    _check_options(method, bounds, prior, max_iterations, tolerance, loss, loss_scale)
+    loss_scale = _check_options(method, bounds, prior, loss, loss_scale)
+    max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
     names = selection(robot, parameters)
     if measurements.q.shape[1] != robot.dof:
@@ -169,54 +172,20 @@ def identify(
     start, start_note = robot, frame_note
     if frame.is_identity:
         start, start_note = partial_base_start(robot, lambda r, n: make(r, names=n), names)
-    e0 = _rms(make(start, names=names).point_residuals(np.zeros(len(names))))
+    e0 = point_rms(make(start, names=names).point_residuals(np.zeros(len(names))))
     settings = Settings(
         method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior, progress
     )
     out = fit_in_rounds(make, start, names, settings, e0)
 
-    final = make(out.robot, names=names)
-    at_start = make(start, names=names)
-    if loss != "linear":
-        final, at_start = final.reweighted(out.weights), at_start.reweighted(out.weights)
-    est = final.restricted(out.estimated)
-    x0 = np.zeros(len(out.estimated))
-    J, r = est.jacobian(x0), est.residual(x0)
-    prior_w = np.array([1.0 / prior[n] if n in prior else 0.0 for n in out.estimated])
-    cov, _ = uncertainty(J, r, known, names, out.estimated, prior_w)
-    r_start = at_start.residual(np.zeros(len(names)))
-    r_all = final.residual(np.zeros(len(names)))
+    got = gather(make, robot, start, names, out, settings, e0)
+    est, x0 = got.estimated, np.zeros(len(out.estimated))
     point_residuals = est.point_residuals(x0)
-    facts = Facts(
-        solver_status=out.solver_status,
-        solver_message=out.message,
-        cost_start=0.5 * float(r_start @ r_start),
-        cost_final=0.5 * float(r @ r),
-        floor=floor_cost(est, ROUNDING),
-        predicted_decrease=gauss_newton_step(J, r)[1] if len(x0) else 0.0,
-        known=known,
-        dof=r.size - len(out.estimated),
-        rms_start=e0,
-        rms_final=_rms(point_residuals),
-        settled=out.settled,
-        rounds=out.rounds,
-        predicted_rms=predicted_rms(out.robot, out.estimated, cov),
-        n_points=point_residuals.size // 3,
-        one_shot=method == "svd",
-        unsupported=out.unsupported,
-        held=tuple(out.pruned),
-        smoothness=smoothness(q, point_residuals),
-        held_gain=held_gain(
-            final.jacobian(np.zeros(len(names))), r_all, names, out.estimated, out.pruned
-        )
-        if out.pruned
-        else 0.0,
-    )
-    checks = audit(facts)
+    checks = audit(got.facts)
     status, message = verdict(checks, out.solver_status, out.message)
 
     calibrated = frame.robot_out(out.robot)
-    cov = frame.covariance_out(cov, out.estimated, out.robot)
+    cov = frame.covariance_out(got.covariance, out.estimated, out.robot)
     se = dict.fromkeys(names, float("nan"))
     se.update(zip(out.estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
     p_nominal, p_final = robot.parameters, calibrated.parameters
@@ -232,7 +201,7 @@ def identify(
         residuals=frame.vectors_out(point_residuals).reshape(-1, 3),
         residuals_before=(y - robot.measured_points(q)).reshape(-1, 3),
         orientation_residuals=frame.vectors_out(est.orientation_residuals(x0)),
-        outliers=_outliers(make(out.robot, names=names), w, known),
+        outliers=got.outliers,
         loss=loss
         if loss == "linear"
         else f"{loss} (scale {loss_scale:g}{' sigma' if known else ' robust sd'})",
@@ -243,12 +212,12 @@ def identify(
         observability=out.end_analysis,
         sigma_known=known,
         wall_time=time.perf_counter() - t_start,
-        start_note=" ".join(t for t in (point_note, start_note) if t),
+        start_note=" ".join(t for t in (point_note, start_note, _repeats(q, y)) if t),
         audit=checks,
         solver_status=out.solver_status,
         representation=_representation(
             calibrated,
-            final,
+            got.at_end,
             frame,
             partial(make, y=y, orientations=measurements.orientations),
             names,
@@ -259,8 +228,8 @@ def identify(
         start_observability=out.start_analysis,
         rounds=out.rounds,
         joined=out.joined,
-        pose_blind=_blind_only_here(final, out, names),
-        still_joints=_still_joints(q, robot),
+        pose_blind=got.facts.blind_here,
+        still_joints=got.facts.still,
     )
     return cal.compare_to(truth) if truth is not None else cal
 
@@ -274,31 +243,6 @@ def _representation(calibrated, final, frame, make_world, names, out):
     return represent(final.jacobian(np.zeros(len(names))), names, out.estimated, out.pruned)
 
 
-def _blind_only_here(final: Problem, out, names) -> tuple[str, ...]:
-    """Held parameters (blind here) that poses across the joint ranges would show."""
-    q_work = workspace_poses(out.robot)
-    held = [n for n in names if n not in out.estimated and n not in out.pruned]
-    if q_work is None or not held:
-        return ()
-    J = workspace_jacobian(out.robot, q_work, names, final)
-    elsewhere = analyse(J, names, q_work.shape[0], prefer=out.estimated).base_parameters
-    return tuple(n for n in held if n in elsewhere)
-
-
-STILL = {"R": np.radians(1.0), "P": 1e-3}
-"""A joint whose values span less than this (1°, 1 mm) in the data barely moves."""
-
-
-def _still_joints(q: np.ndarray, robot: Robot) -> tuple[str, ...]:
-    """Joints that barely move in the data, e.g. ``("q5 = 0.000°",)``."""
-    still = []
-    for i, kind in enumerate(robot.joint_types):
-        if np.ptp(q[:, i]) < STILL[kind]:
-            value = np.degrees(q[0, i]) if kind == "R" else q[0, i] * 1e3
-            still.append(f"q{i + 1} = {value:.3f}{'°' if kind == 'R' else ' mm'}")
-    return tuple(still)
-
-
 def verdict(checks, solver_status: int, solver_message: str | None) -> tuple[int, str]:
     """A Calibration's status and message: the audit's verdict over the solver's."""
     if not checks.passed:
@@ -310,28 +254,32 @@ def verdict(checks, solver_status: int, solver_message: str | None) -> tuple[int
     return 6, STATUS_MESSAGES[6]
 
 
-def _rms(point_residuals: np.ndarray) -> float:
-    """RMS length of point residuals (..., 3), m."""
-    return float(np.sqrt(np.mean(np.sum(np.reshape(point_residuals, (-1, 3)) ** 2, axis=1))))
+def check_iterations(max_iterations, tolerance) -> tuple[int, float]:
+    """`max_iterations` and `tolerance` as int and float, or a CalibrationError saying why."""
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, Integral):
+        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if max_iterations < 1:
+        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+    if isinstance(tolerance, bool) or not (isinstance(tolerance, Real) and 0 < tolerance < 1):
+        raise CalibrationError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
+    return int(max_iterations), float(tolerance)
 
 
-def _check_options(method, bounds, prior, max_iterations, tolerance, loss, loss_scale) -> None:
+def _check_options(method, bounds, prior, loss, loss_scale) -> float:
+    """Check the options beyond `check_iterations`; returns `loss_scale` as a float."""
     if method not in METHODS:
         raise CalibrationError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
     if (bounds or prior) and method != "ipopt":
         raise CalibrationError("bounds and prior need method='ipopt'")
-    if (
-        isinstance(max_iterations, bool)
-        or not isinstance(max_iterations, int)
-        or max_iterations < 1
-    ):
-        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if not (isinstance(tolerance, int | float) and 0 < tolerance < 1):
-        raise CalibrationError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
     if loss not in LOSSES:
         raise CalibrationError(f"unknown loss {loss!r}; use one of {', '.join(LOSSES)}")
-    if not isinstance(loss_scale, int | float) or not (np.isfinite(loss_scale) and loss_scale > 0):
+    if (
+        isinstance(loss_scale, bool)
+        or not isinstance(loss_scale, Real)
+        or not (np.isfinite(loss_scale) and loss_scale > 0)
+    ):
         raise CalibrationError(f"loss_scale must be a positive number, got {loss_scale!r}")
+    return float(loss_scale)
 
 
 def _orientation_weight(measurements: Measurements, orientation_sigma, known, w) -> float:
@@ -358,29 +306,17 @@ def _orientation_weight(measurements: Measurements, orientation_sigma, known, w)
     return 0.1 * float(np.mean(w))
 
 
-OUTLIER_THRESHOLD = 5.0
-"""Robust standard deviations (1.4826 MAD) above the median that make a pose stand out."""
-
-OUTLIER_MINIMUM = {True: 4.0, False: 1e-9}
-"""Residual norm a pose must also exceed to be listed: 4 σ with a stated σ (a 3-D
-Gaussian norm passes it once in a thousand), else 1 nm (below it, residuals are rounding)."""
-
-
-def _outliers(problem: Problem, w: np.ndarray, known: bool) -> tuple[int, ...]:
-    """Poses whose largest point residual stands out from the others.
-
-    A pose is listed when its largest (σ-weighted) point-residual norm lies more than
-    `OUTLIER_THRESHOLD` robust standard deviations above the median of all poses, and
-    above `OUTLIER_MINIMUM`. The norm of Gaussian noise in 3-D has a long right tail,
-    hence 5 rather than 3.
-    """
-    e = np.linalg.norm(
-        problem.point_residuals(np.zeros(len(problem.names))) * w[:, None, :], axis=2
-    ).max(axis=1)
-    med = np.median(e)
-    spread = 1.4826 * np.median(np.abs(e - med))
-    limit = max(med + OUTLIER_THRESHOLD * spread, OUTLIER_MINIMUM[known])
-    return tuple(int(i) for i in np.flatnonzero(e > limit))
+def _repeats(q: np.ndarray, y: np.ndarray) -> str:
+    """A note when rows repeat earlier ones exactly (a file pasted twice), else ""."""
+    rows = np.hstack([q, y.reshape(len(q), -1)])
+    n = len(rows) - len(np.unique(rows, axis=0))
+    if not n:
+        return ""
+    return (
+        f"{n} pose{'s repeat earlier ones' if n > 1 else ' repeats an earlier one'} exactly "
+        "(joint values and measured points): each copy counts as a new measurement, so the "
+        "standard errors are too small if the rows were copied rather than measured again."
+    )
 
 
 def _with_points(robot: Robot, m: int) -> tuple[Robot, str]:

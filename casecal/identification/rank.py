@@ -87,11 +87,36 @@ def held_gain(J: np.ndarray, r: np.ndarray, names, estimated, held) -> float:
     return gauss_newton_step(J[:, both], r)[1] - gauss_newton_step(J[:, est], r)[1]
 
 
-def held_matter(gain: float, n_held: int, scale: float) -> tuple[bool, float, float]:
-    """Whether a cost `gain` (in units where the noise variance is `scale`) from freeing
-    `n_held` parameters is beyond chance; returns (matter, χ² statistic, χ² bound)."""
-    statistic = 2.0 * gain / scale if scale > 0 else 0.0
-    bound = float(chi2_quantile(HELD_LEVEL, n_held)) if n_held else np.inf
+def held_matter(gain: float, n_held: int, cost: float, dof: int, known: bool):
+    """Whether freeing `n_held` held parameters, which would lower the cost by `gain`, is
+    beyond chance.
+
+    With a stated σ (costs in noise variances) the gain is a χ² statistic. Without one, it
+    is compared with what would remain once they are freed (an F test): measuring it
+    against the present residual variance would be circular, since that variance holds
+    the very effect being tested.
+
+    Returns
+    -------
+    matter : bool
+    statistic, bound : float
+        The χ² (or F) statistic and its `HELD_LEVEL` quantile.
+    """
+    if n_held == 0 or gain <= 0:
+        return False, 0.0, np.inf
+    if known:
+        return (
+            2.0 * gain > chi2_quantile(HELD_LEVEL, n_held),
+            2.0 * gain,
+            chi2_quantile(HELD_LEVEL, n_held),
+        )
+    rest_dof = dof - n_held
+    if rest_dof <= 0 or cost - gain <= 0:
+        return False, 0.0, np.inf
+    from scipy.special import fdtri  # the F quantile
+
+    statistic = (gain / n_held) / ((cost - gain) / rest_dof)
+    bound = float(fdtri(n_held, rest_dof, HELD_LEVEL))
     return statistic > bound, statistic, bound
 
 
@@ -183,13 +208,16 @@ def prune(J, r, names, candidates, offsets, known, e0, J_work, noise, establishe
         if name in established:
             continue
         trial, held = judge.hold([*keep, k])
-        if held:  # the newcomer, or what it would spoil: leave it out
+        if not held or (name not in held and judge.significant(trial, k)):
+            # nothing spoiled; or the data clearly see the newcomer, and what it makes
+            # undetermined is held by the usual rules instead
+            keep = trial
+            dropped.update(held)
+        else:  # the newcomer, or what it would spoil for no gain the data show: leave it out
             dropped[name] = held.get(name) or (
                 "its effect is seen only through parameters already estimated, which it "
                 f"would leave undetermined ({', '.join(held)})"
             )
-        else:
-            keep = trial
     return [candidates[k] for k in sorted(keep)], dropped
 
 
@@ -204,6 +232,14 @@ class _Judge:
         self.plausible = np.array([PLAUSIBLE_DEVIATION[unit(n)] for n in candidates])
         # without σ, residuals still hold what an unfitted newcomer may explain
         self.untried = np.array([not reduced.known and n not in established for n in candidates])
+
+    def significant(self, subset: list[int], k: int) -> bool:
+        """Whether candidate `k`'s estimate, fitted with `subset`, stands out of its error."""
+        step, C = self.reduced.fit(subset)
+        i = subset.index(k)
+        se = np.sqrt(max(C[i, i], 0.0))
+        est = self.offsets[k] + step[i]
+        return bool(abs(est) >= SIGNIFICANT * se and abs(est) <= ALIAS * self.plausible[k])
 
     def hold(self, subset: list[int]) -> tuple[list[int], dict]:
         """`subset` minus what must be held, and why (by candidate name)."""

@@ -36,6 +36,7 @@ from ..design.poses import uniform
 from ..errors import CalibrationError
 from ..model.robot import Robot
 from .analysis import Observability, analyse, pivot_order
+from .outliers import outlier_poses
 from .problem import Problem
 from .rank import WIDE, held_gain, held_matter, prune
 from .solvers import SOLVERS, floor_cost
@@ -185,6 +186,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         )
         pruned.update(dropped)
         seen.append(frozenset(order))
+        held_now = bool(dropped)  # held parameters are never candidates again: progress
         dropped = [n for n in dropped if n in order]  # newcomers held at once were never fitted
         if set(keep) <= set(order) and not dropped:
             # nothing joined and nothing was held for the noise: what left is blind here
@@ -192,7 +194,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
             # the rest with it fixed, so the fit has settled where it stands
             order = keep
             misjudged = _held_that_matter(J, r, names, order, pruned, settings)
-            if not misjudged or protected:
+            if not misjudged or set(misjudged) <= protected:
                 settled = True
                 break
             # the data see what was held as useless: estimate it after all (once)
@@ -201,8 +203,8 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
                 del pruned[n]
             order = [*order, *misjudged]
             continue
-        if frozenset(keep) in seen:
-            break
+        if frozenset(keep) in seen and not held_now:
+            break  # the same set again with nothing newly held: a cycle
         if dropped:
             # what was fitted beside a parameter the data cannot determine may carry its
             # wild values: start over, with every held parameter at its start value
@@ -239,10 +241,11 @@ def _held_that_matter(J, r, names, order, pruned, settings) -> list[str]:
     useless = [n for n, why in pruned.items() if WIDE not in why and n in names]
     if not useless:
         return []
-    dof = r.size - len(order)
-    scale = 1.0 if settings.known else (float(r @ r) / dof if dof > 0 else 1.0)
     gain = held_gain(J, r, names, order, useless)
-    return [n for n in names if n in useless] if held_matter(gain, len(useless), scale)[0] else []
+    matter = held_matter(
+        gain, len(useless), 0.5 * float(r @ r), r.size - len(order), settings.known
+    )
+    return [n for n in names if n in useless] if matter[0] else []
 
 
 def _release(make, point, names, settings, weights, hold, order, base, r):
@@ -319,7 +322,8 @@ def _solve_round(make, point, names, estimated, settings: Settings, weights, hol
         kwargs["prior"] = {n: sd for n, sd in settings.prior.items() if n in estimated}
         kwargs["prior_offset"] = np.array([offset[n] for n in estimated])
     iterations, history = 0, []
-    for _ in range(1 if settings.loss == "linear" else 20):
+    rejected = False
+    for _ in range(1 if settings.loss == "linear" else 21):
         problem = _problem(make, point, names, settings, weights).restricted(estimated)
         x = np.zeros(len(estimated))
         r = problem.residual(x)
@@ -333,14 +337,19 @@ def _solve_round(make, point, names, estimated, settings: Settings, weights, hol
         iterations += its
         history += hist if not history else hist[1:]
         point = point.with_deviations(dict(zip(estimated, x.tolist(), strict=True)))
-        if settings.loss == "linear" or status < 0:
+        if settings.loss == "linear" or status < 0 or rejected:
             break
-        residuals = make(point, names=names).point_residuals(np.zeros(len(names)))
+        at = make(point, names=names)
+        residuals = at.point_residuals(np.zeros(len(names)))
         e = np.linalg.norm(residuals * settings.w[:, None, :], axis=2)  # (N, m), σ units
         c = settings.loss_scale * (1.0 if settings.known else _robust_sd(e))
         new = _loss_weights(settings.loss, e, c)
         if np.abs(new - weights).max() < 1e-6:
-            break
+            # the loss found the outliers; least squares on the rest gives estimates whose
+            # covariance and χ² hold (a bounded influence is still a bias)
+            new = np.ones_like(weights)
+            new[list(outlier_poses(at, settings.w, settings.known))] = 0.0
+            rejected = True
         weights = new
     return point, iterations, status, history, message, weights
 

@@ -69,7 +69,9 @@ def build_summary(cal: Calibration) -> Summary:
         ("Robot:", f"{cal.nominal.name} ({cal.nominal.joint_types}, {cal.nominal.convention})"),
         ("Method:", cal.method),
         ("Status:", f"{cal.status} ({'success' if cal.success else 'FAILED'})"),
-        ("Poses:", f"{cal.n_poses} ({cal.dof_residual + len(cal.estimated)} coordinates)"),
+        ("Distances:", f"{cal.n_poses} (between pairs of poses)")
+        if cal.measured == "distances"
+        else ("Poses:", f"{cal.n_poses} ({cal.dof_residual + len(cal.estimated)} coordinates)"),
         ("Parameters:", f"{len(cal.parameters)} asked, {len(cal.estimated)} estimated"),
         ("Iterations:", f"{cal.iterations} in {cal.rounds} round{'s' * (cal.rounds != 1)}"),
     ]
@@ -125,14 +127,6 @@ def _notes(cal: Calibration) -> list[str]:
             f"on, for instance); a later round estimated {'it' if one else 'them'}."
         )
     notes += _held_notes(cal)
-    if cal.pose_blind:
-        still = f" ({', '.join(cal.still_joints)} in every pose)" if cal.still_joints else ""
-        notes.append(
-            f"{_names(cal.pose_blind)} cannot be told apart at these poses{still}, but poses "
-            "across the joint ranges would separate them: the calibrated robot is right on "
-            "poses like the measured ones, and elsewhere these parameters' own deviations "
-            "show. Measure poses that move every joint to calibrate them."
-        )
     if cal.loss != "linear":
         notes.append(f"Robust fit: {cal.loss} loss, by iteratively reweighted least squares.")
     if cal.outliers:
@@ -163,7 +157,8 @@ def _notes(cal: Calibration) -> list[str]:
     if not cal.sigma_known:
         notes.append(
             "No measurement sigma was given: standard errors use the residual scale "
-            f"({_residual_scale(cal) * 1e3:.3g} mm per coordinate)."
+            f"({_residual_scale(cal) * 1e3:.3g} mm per "
+            f"{'distance' if cal.measured == 'distances' else 'coordinate'})."
         )
     return notes
 

@@ -1,0 +1,180 @@
+"""Gather what the answer audit looks at from where the rounds of a fit ended.
+
+Every number the audit judges is measured here, on the problem the solver solved: with a
+robust loss, the poses it left out are left out; with a prior, its pseudo-observations
+are rows of the problem (the minimum of data plus prior is not the data's minimum); with
+bounds, what freeing the active ones would gain is told apart from what the free
+parameters could still gain.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .audit import Facts, predicted_rms, smoothness
+from .evidence import blind_only_here, outside_gain, still_joints
+from .linalg import gauss_newton_step
+from .outliers import outlier_poses
+from .problem import Problem
+from .rank import held_gain
+from .rounds import Outcome
+from .solvers import ROUNDING, floor_cost
+from .uncertainty import uncertainty
+
+
+@dataclass(frozen=True)
+class Gathered:
+    """`Facts` and what `casecal.identify` builds its result from.
+
+    Attributes
+    ----------
+    facts : Facts
+    covariance : ndarray, shape (k, k)
+        Of the estimated deviations, fit frame.
+    estimated : Problem
+        At the fitted robot, the estimated parameters only (weighted as in the fit).
+    at_end : Problem
+        At the fitted robot, every asked-for parameter.
+    outliers : tuple of int
+        Poses whose residuals stand out.
+    """
+
+    facts: Facts
+    covariance: np.ndarray
+    estimated: Problem
+    at_end: Problem
+    outliers: tuple[int, ...]
+
+
+def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gathered:
+    """Measure the `Facts` of a fit (module doc).
+
+    Parameters
+    ----------
+    make : callable(robot, names=...) -> Problem
+        The measurements, fit frame.
+    robot, start : Robot
+        The nominal robot (for the parameters not asked for) and where the fit started.
+    names : list of str
+        The asked-for parameters.
+    out : Outcome
+        Where the rounds ended.
+    settings : casecal.identification.rounds.Settings
+    e0 : float
+        RMS error at the start, m.
+    """
+    robust = settings.loss != "linear"
+    final, at_start = make(out.robot, names=names), make(start, names=names)
+    if robust:
+        final, at_start = final.reweighted(out.weights), at_start.reweighted(out.weights)
+    est = final.restricted(out.estimated)
+    x0 = np.zeros(len(out.estimated))
+    J, r = est.jacobian(x0), est.residual(x0)
+    prior_w = np.array([1.0 / settings.prior.get(n, np.inf) for n in out.estimated])
+    cov, _ = uncertainty(J, r, settings.known, names, out.estimated, prior_w)
+    deviation = np.array([out.robot.parameters[n] - start.parameters[n] for n in out.estimated])
+    J_fit, r_fit = _with_prior(J, r, prior_w, deviation)
+    r_start = at_start.residual(np.zeros(len(names)))
+    active = _active(out.estimated, deviation, settings.bounds)
+    free = [i for i, n in enumerate(out.estimated) if n not in active]
+    decrease = gauss_newton_step(J_fit[:, free], r_fit)[1] if free else 0.0
+    point_residuals = est.point_residuals(x0)
+    q = est.q
+    outliers = outlier_poses(make(out.robot, names=names), settings.w, settings.known)
+    inliers = _inliers(make(out.robot, names=out.estimated), outliers) if robust else None
+    beyond = make(out.robot, names=[*out.estimated, *_outside(robot, names)])
+    unasked = outside_gain(beyond.reweighted(out.weights) if robust else beyond, out.estimated)
+    keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
+    n_prior = int(np.sum(prior_w > 0))
+    facts = Facts(
+        solver_status=out.solver_status,
+        solver_message=out.message,
+        cost_start=0.5 * float(r_start @ r_start),
+        cost_final=0.5 * float(r_fit @ r_fit),
+        floor=floor_cost(est, ROUNDING),
+        predicted_decrease=decrease,
+        known=settings.known,
+        dof=(inliers[1] if inliers else r.size - len(out.estimated)) + n_prior,
+        rms_start=e0,
+        rms_final=point_rms(point_residuals),
+        settled=out.settled,
+        rounds=out.rounds,
+        predicted_rms=predicted_rms(out.robot, out.estimated, cov),
+        n_points=point_residuals.size // 3,
+        n_estimated=len(out.estimated),
+        one_shot=settings.method == "svd",
+        unsupported=out.unsupported,
+        held=tuple(out.pruned),
+        smoothness=smoothness(q[keep], point_residuals[keep]),
+        held_gain=held_gain(
+            final.jacobian(np.zeros(len(names))),
+            final.residual(np.zeros(len(names))),
+            names,
+            out.estimated,
+            out.pruned,
+        )
+        if out.pruned
+        else 0.0,
+        # the one-shot method chose its set where it linearised
+        blind_here=blind_only_here(
+            final,
+            out.start_robot if settings.method == "svd" else out.robot,
+            out.estimated,
+            out.pruned,
+        ),
+        still=still_joints(q, robot),
+        outside_gain=unasked.gain,
+        outside_visible=unasked.n_visible,
+        outside_leading=unasked.leading,
+        inliers=inliers,
+        n_prior=n_prior,
+        bounds=None if not settings.bounds else tuple(active),
+        bound_gain=gauss_newton_step(J_fit, r_fit)[1] - decrease if active else 0.0,
+    )
+    return Gathered(facts, cov, est, final, outliers)
+
+
+def _outside(robot, names) -> list[str]:
+    return [n for n in robot.parameter_names if n not in names]
+
+
+def _with_prior(J, r, prior_w, deviation):
+    """The prior's pseudo-observations ``0 = deviation ± σ_p`` as rows of J and r."""
+    rows = prior_w > 0
+    if not np.any(rows):
+        return J, r
+    J_p = np.diag(prior_w)[rows]
+    return np.vstack([J, J_p]), np.concatenate([r, -(prior_w * deviation)[rows]])
+
+
+BOUND_TOLERANCE = 1e-6
+"""A deviation within this fraction of its bounds' width of a bound sits on it."""
+
+
+def _active(estimated, deviation, bounds) -> list[str]:
+    """Estimated parameters that sit on one of their bounds."""
+    active = []
+    for name, value in zip(estimated, deviation, strict=True):
+        if name in bounds:
+            lo, hi = bounds[name]
+            tol = BOUND_TOLERANCE * (hi - lo)
+            if value <= lo + tol or value >= hi - tol:
+                active.append(name)
+    return active
+
+
+def _inliers(problem: Problem, outliers) -> tuple[float, int, float, int]:
+    """(cost, dof, RMS in m, outliers) of the poses not in `outliers`, unweighted by the
+    loss: what a robust fit's residuals say about the noise."""
+    x0 = np.zeros(len(problem.names))
+    keep = np.setdiff1d(np.arange(len(problem.q)), outliers)
+    r = problem.residual(x0).reshape(len(problem.q), -1)[keep].ravel()
+    rms = point_rms(problem.point_residuals(x0)[keep])
+    return 0.5 * float(r @ r), r.size - len(x0), rms, len(outliers)
+
+
+def point_rms(point_residuals: np.ndarray) -> float:
+    """RMS length of point residuals (..., 3), m."""
+    return float(np.sqrt(np.mean(np.sum(np.reshape(point_residuals, (-1, 3)) ** 2, axis=1))))

@@ -1,0 +1,158 @@
+"""Fits whose residuals look fine but whose robot is wrong away from the data must fail.
+
+Each case has data that a model can match exactly or to the noise, and a true robot that
+the fitted one does not match on poses across the workspace: no residual degrees of
+freedom, a parameter outside the asked-for set, a joint that never moves, the paper's
+lockstep schedule with every parameter. The audit must say which, in words.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import casecal as cc
+
+DEG = np.pi / 180
+
+
+def held_out_rms(cal, true, seed=123) -> float:
+    """RMS error (m) of the calibrated robot on 300 poses across the joint ranges."""
+    q = cc.poses.uniform(true, 300, seed=seed)
+    return float(np.sqrt(np.mean(np.sum((true.position(q) - cal.robot.position(q)) ** 2, -1))))
+
+
+def test_no_residual_degrees_of_freedom_is_a_failure():
+    robot = cc.load_robot("puma560")
+    rng = np.random.default_rng(0)
+    truth = {n: rng.normal() * 1e-3 for n in robot.parameters if not n.startswith("alpha")}
+    true = robot.with_deviations(truth)
+    q = cc.poses.uniform(robot, 9, seed=0)  # 27 coordinates for 27 identifiable parameters
+    cal = cc.identify(robot, cc.simulate(true, q, noise=1e-5, seed=0), "all")
+    assert cal.dof_residual == 0
+    assert held_out_rms(cal, true) > 1e-4  # m
+    assert not cal.success
+    assert "no residual degrees of freedom" in cal.message
+    assert "measure more poses" in cal.message
+
+
+@pytest.mark.parametrize("sigma", [0.0, 1e-5])
+def test_a_deviation_outside_the_asked_for_set_is_named(sigma):
+    """α2 off by 0.02° with the paper's θ, a, d: the estimates absorb it."""
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"alpha2": 0.02 * DEG, "a3": 0.2e-3})
+    q = cc.poses.uniform(robot, 100, seed=1)
+    cal = cc.identify(robot, cc.simulate(true, q, noise=sigma, seed=2))
+    assert held_out_rms(cal, true) > 3 * max(sigma, 1e-6)  # the robot is wrong elsewhere
+    assert not cal.success
+    first = cal.audit.failures[0]
+    assert first.name == "parameters not asked for do not matter"
+    assert "alpha2" in first.text and "add alpha2" in cal.message
+
+
+@pytest.mark.parametrize("sigma", [0.0, 1e-5])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_deviations_inside_the_asked_for_set_pass(sigma, seed):
+    """The same check does not cry wolf when the asked-for set holds every deviation."""
+    robot = cc.load_robot("puma560")
+    rng = np.random.default_rng(seed)
+    names = cc.parameters.select(robot.parameter_names, ["theta*", "a*", "d*"])
+    truth = {n: rng.uniform(-1, 1) * (0.5e-3 if n[0] in "ad" else 0.05 * DEG) for n in names}
+    true = robot.with_deviations(truth)
+    q = cc.poses.uniform(robot, 100, seed=seed)
+    cal = cc.identify(robot, cc.simulate(true, q, noise=sigma, seed=seed))
+    assert cal.success, cal.message
+    check = next(c for c in cal.audit.checks if c.name.startswith("parameters not asked"))
+    assert check.passed
+
+
+@pytest.mark.parametrize("sigma", [0.0, 2e-5])
+def test_a_joint_that_never_moves_is_a_failure(sigma):
+    robot = cc.load_robot("ur5e")
+    rng = np.random.default_rng(4)
+    names = cc.parameters.select(robot.parameter_names, ["theta*", "a*", "d*", "alpha*"])
+    truth = {n: rng.uniform(-1, 1) * (0.5e-3 if n[0] in "ad" else 0.05 * DEG) for n in names}
+    true = robot.with_deviations(truth)
+    q = cc.poses.uniform(robot, 150, seed=5)
+    q[:, 1] = 0.5  # the shoulder stays at 28.648°
+    cal = cc.identify(robot, cc.simulate(true, q, noise=sigma, seed=6), names)
+    assert held_out_rms(cal, true) > 10 * max(sigma, 1e-6)
+    assert not cal.success
+    assert "q2 = 28.648° in every pose" in cal.message
+    assert "move every joint" in cal.message
+
+
+@pytest.mark.parametrize("robot_name", ["puma560", "ur5e"])
+def test_the_lockstep_schedule_with_every_parameter_is_a_failure(robot_name):
+    """Noise-free data on the paper's schedule fit to 1e-8 mm, and the robot is mm wrong."""
+    robot = cc.load_robot(robot_name)
+    rng = np.random.default_rng(0)
+    truth = {
+        n: rng.normal() * (0.1 * DEG if n.startswith(("theta", "alpha", "beta")) else 0.5e-3)
+        for n in robot.parameters
+        if not n.startswith(("base_", "tool_", "point"))
+    }
+    true = robot.with_deviations(truth)
+    cal = cc.identify(robot, cc.simulate(true, cc.poses.seed_schedule(robot, 25)), "all")
+    assert cal.rms < 1e-7  # m: the data are matched
+    assert held_out_rms(cal, true) > 1e-4
+    assert not cal.success
+    assert any(c.name == "prediction no worse than uncalibrated" for c in cal.audit.failures)
+
+
+@pytest.mark.parametrize("loss", ["huber", "soft_l1"])
+def test_a_robust_fit_leaves_its_outliers_out_of_the_noise_check(loss):
+    """30 of 80 poses 5 mm off: the loss finds them, least squares on the rest is judged."""
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 0.4e-3, "theta3": 0.03 * DEG, "d4": -0.3e-3})
+    q = cc.poses.uniform(robot, 80, seed=0)
+    meas = cc.simulate(true, q, noise=2e-5, seed=0)
+    rng = np.random.default_rng(0)
+    bad = rng.choice(80, 30, replace=False)
+    points = meas.points.copy()
+    points[bad] += 5e-3 * rng.normal(size=(30, 1, 3))
+    cal = cc.identify(robot, cc.Measurements(q, points, meas.sigma), loss=loss)
+    assert cal.success, cal.message
+    assert set(cal.outliers) == set(bad.tolist())
+    assert "without the 30 outlying poses" in str(cal.summary())
+    err = held_out_rms(cal, true)
+    q_new = cc.poses.uniform(robot, 300, seed=123)
+    J = cal.robot.position_jacobian(q_new, list(cal.estimated))[0]
+    predicted = np.sqrt(np.einsum("nik,kl,nil->", J, cal.covariance, J) / len(q_new))
+    assert err < 1.5 * predicted  # the covariance holds: outliers no longer bias the fit
+
+
+def test_an_active_bound_that_the_data_push_against_is_a_failure():
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 1e-3, "theta3": 0.1 * DEG})
+    q = cc.poses.uniform(robot, 100, seed=0)
+    meas = cc.simulate(true, q, noise=2e-5, seed=1)
+    cal = cc.identify(robot, meas, method="ipopt", bounds={"a2": (-2e-4, 2e-4)})
+    assert not cal.success
+    assert cal.audit.failures[0].name == "no bound decides an estimate"
+    assert "a2 sits on its bounds" in cal.message
+    loose = cc.identify(robot, meas, method="ipopt", bounds={"a2": (-2e-3, 2e-3)})
+    assert loose.success, loose.message
+    assert loose.deviations["a2"] == pytest.approx(1e-3, abs=4 * loose.standard_errors["a2"])
+
+
+def test_a_prior_the_data_agree_with_passes_the_convergence_check():
+    """The minimum of data plus prior is not the data's: judged on the problem solved."""
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 0.2e-3, "d3": -0.1e-3})
+    q = cc.poses.uniform(robot, 100, seed=0)
+    meas = cc.simulate(true, q, noise=2e-5, seed=1)
+    cal = cc.identify(robot, meas, method="ipopt", prior={"a2": 0.5e-3, "d3": 0.5e-3})
+    assert cal.success, cal.message
+    assert cal.audit.checks[0].passed
+
+
+def test_rows_pasted_twice_are_not_read_as_a_model_error():
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 0.4e-3, "theta3": 0.03 * DEG})
+    q = cc.poses.uniform(robot, 60, seed=0)
+    m = cc.simulate(true, q, noise=2e-5, seed=0)
+    twice = cc.Measurements(np.vstack([q, q]), np.vstack([m.points, m.points]), 2e-5)
+    cal = cc.identify(robot, twice)
+    assert cal.success, cal.message  # smoothness once compared each row with its copy
+    assert "60 poses repeat earlier ones exactly" in str(cal.summary())
