@@ -100,6 +100,26 @@ def test_the_lockstep_schedule_with_every_parameter_is_a_failure(robot_name):
     assert any(c.name == "prediction no worse than uncalibrated" for c in cal.audit.failures)
 
 
+@pytest.mark.parametrize("trial", range(4))
+def test_a_fit_worse_than_uncalibrated_on_new_poses_does_not_pass(trial):
+    """The pose-count study's Scorbot at 100 lockstep poses with noise: the covariance
+    predicts an error near what the calibration moves the points by, and one of these
+    trials passed while its robot was worse than the nominal one across the workspace."""
+    from casecal.studies.engine import Grid, derive_seed, pose_set, truth_for
+
+    grid = Grid(robots=("scorbot",), poses=(100,), noise=(2e-5,), schedules=("seed",), seed=11)
+    robot = cc.load_robot("scorbot")
+    q = pose_set(grid, robot, "seed", 100)
+    truth = truth_for(grid, robot, trial)
+    true = robot.with_deviations(truth)
+    noise_seed = derive_seed(grid.seed, robot.name, "seed", 100, repr(2e-5), trial)
+    cal = cc.identify(robot, cc.simulate(true, q, noise=2e-5, seed=noise_seed))
+    if cal.success:
+        q_new = cc.poses.uniform(true, 300, seed=123)
+        before = np.sqrt(np.mean(np.sum((true.position(q_new) - robot.position(q_new)) ** 2, -1)))
+        assert held_out_rms(cal, true) <= before
+
+
 @pytest.mark.parametrize("loss", ["huber", "soft_l1"])
 def test_a_robust_fit_leaves_its_outliers_out_of_the_noise_check(loss):
     """30 of 80 poses 5 mm off: the loss finds them, least squares on the rest is judged."""

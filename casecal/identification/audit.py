@@ -159,6 +159,12 @@ class Facts:
     settled: bool
     rounds: int
     predicted_rms: float | None
+    correction_rms: float = 0.0
+    """RMS distance (m) the fit moved the measured points by, at poses across the
+    workspace: the uncalibrated error there plus the estimate's own error."""
+    noise_rms: float = 0.0
+    """Per-coordinate noise RMS (m): σ when stated, else the residual RMS; a predicted
+    error below it is as good as the instrument can tell."""
     n_points: int = 1
     n_estimated: int = 0
     one_shot: bool = False
@@ -446,34 +452,49 @@ def _prediction(f: Facts) -> Check:
         )
     if f.predicted_rms is None:
         return Check(name, None, f.prediction_note or "no joint limits to draw poses from")
-    ok = f.predicted_rms <= max(f.rms_start, 1e-9)
+    p, c = f.predicted_rms, f.correction_rms
+    # the correction c is the true error before calibration plus the estimate's own
+    # error (independent, mean square p²): what the robot was off by there is √(c² − p²)
+    before = np.sqrt(max(c**2 - p**2, 0.0))
+    ok = p <= max(before, f.noise_rms, 1e-9)
     text = (
         f"predicted RMS error on {PREDICTION_POSES} new poses within the joint limits "
-        f"{f.predicted_rms * 1e3:.3g} mm (from the covariance); uncalibrated "
-        f"{f.rms_start * 1e3:.3g} mm"
+        f"{p * 1e3:.3g} mm (from the covariance), against about {before * 1e3:.3g} mm before "
+        "calibration"
+        if c > p
+        else f"predicted RMS error on {PREDICTION_POSES} new poses within the joint limits "
+        f"{p * 1e3:.3g} mm (from the covariance), more than the {c * 1e3:.3g} mm RMS the "
+        "calibration moves them by"
     )
     if not ok:
         text += (
             ": these poses do not support the estimated parameters, and the calibrated "
-            "robot would be worse than the nominal one away from them (measure more, "
+            "robot would be no better than the nominal one away from them (measure more, "
             "better-spread poses, or ask for fewer parameters)"
         )
     return Check(name, ok, text)
 
 
-def predicted_rms(robot: Robot, estimated, cov: np.ndarray, seed: int = 0) -> float | None:
-    """RMS over `PREDICTION_POSES` uniform poses of the error the covariance predicts, m.
+def predicted_rms(
+    robot: Robot, start: Robot, estimated, cov: np.ndarray, seed: int = 0
+) -> tuple[float, float] | None:
+    """The error the covariance predicts, and the correction the fit made, across the
+    workspace: RMS over `PREDICTION_POSES` uniform poses, m.
 
     The error of each measured point is Gaussian with covariance ``J C Jᵀ``; its mean
-    square is ``trace(J C Jᵀ)``. None when the robot has no limits to draw poses from.
+    square is ``trace(J C Jᵀ)``. The correction is how far the measured points of
+    `robot` lie from those of `start`. None when the robot has no limits to draw poses
+    from.
     """
-    if not estimated:
-        return 0.0
     try:
         q = uniform(robot, PREDICTION_POSES, seed=seed)
     except CalibrationError:
         return None
+    moved = robot.measured_points(q) - start.measured_points(q)
+    correction = float(np.sqrt(np.mean(np.sum(moved.reshape(-1, 3) ** 2, axis=1))))
+    if not estimated:
+        return 0.0, correction
     chain = kinematics.chain(robot.structure)
     J = chain.evaluate("points_jacobian", q, robot.vector(), chain.columns(list(estimated)))
     mean_square = np.einsum("nik,kl,nil->", J, cov, J) / (J.shape[0] * J.shape[1] / 3)
-    return float(np.sqrt(max(mean_square, 0.0)))
+    return float(np.sqrt(max(mean_square, 0.0))), correction

@@ -88,6 +88,7 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
     unasked = outside_gain(beyond.reweighted(out.weights) if robust else beyond, out.estimated)
     keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
     n_prior = int(np.sum(prior_w > 0))
+    workspace = predicted_rms(out.robot, start, out.estimated, cov)
     facts = Facts(
         solver_status=out.solver_status,
         solver_message=out.message,
@@ -101,7 +102,11 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
         rms_final=point_rms(point_residuals),
         settled=out.settled,
         rounds=out.rounds,
-        predicted_rms=predicted_rms(out.robot, out.estimated, cov),
+        predicted_rms=None if workspace is None else workspace[0],
+        correction_rms=0.0 if workspace is None else workspace[1],
+        noise_rms=float(np.sqrt(np.mean(1.0 / settings.w**2)))
+        if settings.known
+        else point_rms(point_residuals) / np.sqrt(3.0),
         n_points=point_residuals.size // 3,
         n_estimated=len(out.estimated),
         one_shot=settings.method == "svd",
