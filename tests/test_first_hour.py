@@ -4,6 +4,7 @@ right stop with the fix named, and what a user asked to be written is written.""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import stat
 import subprocess
@@ -300,3 +301,22 @@ def test_outputs_create_one_missing_folder_not_a_mistyped_tree(tmp_path, capsys)
     one = tmp_path / "new" / "cal.toml"
     assert main(["identify", "puma560", str(tmp_path / "m.csv"), "-o", str(one)]) == 0
     assert one.is_file()
+
+
+def test_report_help_names_every_study_and_states_the_readme_timings(capsys):
+    from pathlib import Path
+
+    from casecal.report import NAMES, STUDIES
+
+    with pytest.raises(SystemExit):
+        main(["report", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert set(NAMES) == set(STUDIES)
+    for words in NAMES.values():
+        assert words in text, words
+    readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
+    full = re.search(r"about (\d+) minutes? for nine studies", readme)
+    quick = re.search(r"--quick` about (\d+) s", readme)
+    assert full and quick
+    assert f"About {full[1]} minutes on 2 idle cores" in text
+    assert f"--quick: about {quick[1]} s" in text

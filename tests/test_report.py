@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from casecal.report import PDF_TABLES, run_studies, study_runner
-from casecal.report.pdf import write_pdf
+from casecal.report.pdf import Layout, write_pdf
 from casecal.report.studies_paper import PAPER_TABLE1
 
 
@@ -19,11 +19,14 @@ def test_quick_report(tmp_path):
         quick=True,
         run=study_runner("serial", progress=False),
     )
-    n = write_pdf(tmp_path / "r.pdf", "test", ["settings"], results, PDF_TABLES)
+    layout = Layout()
+    n = write_pdf(tmp_path / "r.pdf", "test", ["settings"], results, PDF_TABLES, layout)
     assert n >= 8
     pdf = (tmp_path / "r.pdf").read_bytes()
     pages = len(re.findall(rb"/Type\s*/Page[^s]", pdf))
-    assert pages == 1 + n + len(PDF_TABLES)  # title, one page per figure and per table
+    assert pages == 1 + len(layout.filled)  # the title page, then the flow
+    # figures and tables flow down the pages: none but the last is left mostly blank
+    assert min(layout.filled[:-1]) > 0.4, layout.filled
     for study in results:
         for fig in study.figures:
             assert fig.path.is_file() and fig.path.stat().st_size > 10_000
@@ -37,6 +40,27 @@ def test_quick_report(tmp_path):
     assert t1["one-shot 100 error %"].abs().max() < 0.1813
     assert t1["iterated 100 error %"].abs().max() < 1e-6
     np.testing.assert_allclose(t1["synthetic"], [v[0] for v in PAPER_TABLE1.values()])
+    # every error column in one convention, (identified - synthetic) / |synthetic|: where the
+    # paper's printed values differ, its error has their sign (the paper's Δθ1 row is
+    # inconsistent and said so in the caption)
+    differ = (t1["paper identified"] != t1["synthetic"]) & (t1.deviation != "Δθ1")
+    shown = t1[differ]
+    assert len(shown) >= 5
+    assert (
+        np.sign(shown["paper error %"]) == np.sign(shown["paper identified"] - shown["synthetic"])
+    ).all()
+    assert (
+        t1.deviation.str.startswith("Δθ").sum() == 4
+        and not t1.deviation.str.contains("theta").any()
+    )
+    caption = next(t.caption for s in results for t in s.tables if t.path.stem == "table1")
+    assert "Δθ1 row is inconsistent" in caption
+
+    # the SCARA table's reason does not repeat the group's names or combinations
+    blind = pd.read_csv(tmp_path / "scara_blind_spots.csv")
+    for _, row in blind.iterrows():
+        for name in row["parameters"].split(", "):
+            assert name not in row["why"]
 
     # pose count: every trial is in the table; a fit that passed its audit rarely ends
     # worse than the uncalibrated robot (the audit predicts, it cannot know), and the

@@ -335,12 +335,18 @@ def smoothness(q: np.ndarray, residuals: np.ndarray, seed: int = 0) -> float | N
     if n > SMOOTHNESS_POSES:
         keep = np.random.default_rng(seed).choice(n, SMOOTHNESS_POSES, replace=False)
         q, r, n = q[keep], r[keep], SMOOTHNESS_POSES
+    from scipy.spatial import cKDTree  # scipy loads slowly; only fits with data need it
+
     span = np.ptp(q, axis=0)
     z = (q - q.min(axis=0)) / np.where(span > 0, span, 1.0)
-    d = np.sum((z[:, None, :] - z[None, :, :]) ** 2, axis=2)
-    d[d == 0] = np.inf  # itself, and repeated rows of a file: a copy is no neighbour
-    nearest = np.argmin(d, axis=1)
-    has = np.isfinite(d[np.arange(n), nearest])
+    # itself, and repeated rows of a file, are at distance 0: a copy is no neighbour, so
+    # the nearest is the first at a positive distance among the k closest
+    k = min(n, 8)
+    d, index = cKDTree(z).query(z, k=k)
+    first = np.argmax(d > 0, axis=1)
+    rows = np.arange(n)
+    has = d[rows, first] > 0
+    nearest = index[rows, first]
     total = 2.0 * np.mean(np.sum(r[has] ** 2, axis=1)) if has.sum() >= 12 else 0.0
     if total == 0:
         return None

@@ -56,6 +56,11 @@ PARALLEL_TOLERANCE = 0.01
 COMPILE_MIN_POSES = 200
 """Batches of at least this many poses use compiled C (when a C compiler is present)."""
 
+HOT_CALLS = 100
+"""Smaller batches of one chain and output kind, in one process, after which they too use
+compiled C: one kernel of every parameter column, its columns taken in numpy, so that the
+many column sets of repeated fits (a study's trials) share one compile per machine."""
+
 KINDS = ("fk", "position", "position_jacobian", "pose_jacobian", "points", "points_jacobian")
 
 
@@ -156,6 +161,7 @@ class Chain:
         self.angle_index = [k for k, n in enumerate(self.names) if is_constant_angle(n)]
         self._graph = None
         self._evaluators: dict = {}
+        self._small_calls: dict[str, int] = {}
 
     @property
     def graph(self):
@@ -286,11 +292,23 @@ class Chain:
         -------
         ndarray, shape (N, 4, 4), (N, 3), (N, 3, k) or (N, 6, k)
         """
-        key = (kind, tuple(columns))
+        columns = tuple(columns)
+        if q.shape[0] < COMPILE_MIN_POSES:
+            hot = self._small_calls[kind] = self._small_calls.get(kind, 0) + 1
+            if hot >= HOT_CALLS:
+                jacobian = kind.endswith("jacobian")
+                every = tuple(range(len(self.names))) if jacobian else ()
+                out = self._evaluator(kind, every).compiled(q, self.extended(p))
+                if out is not None:
+                    return out[..., list(columns)] if jacobian else out
+        return self._evaluator(kind, columns)(q, self.extended(p))
+
+    def _evaluator(self, kind: str, columns: tuple[int, ...]) -> _Evaluator:
+        key = (kind, columns)
         evaluator = self._evaluators.get(key)
         if evaluator is None:
-            evaluator = self._evaluators[key] = _Evaluator(self, kind, key[1])
-        return evaluator(q, self.extended(p))
+            evaluator = self._evaluators[key] = _Evaluator(self, kind, columns)
+        return evaluator
 
     def _points(self, T) -> ca.SX:
         """Stacked world positions (3m) of the measured points ``T · [p_k; 1]``."""
@@ -344,6 +362,14 @@ class _Evaluator:
         if len(self.shape) == 1:
             return res.T.copy()
         return res.T.reshape(n, *self.shape)
+
+    def compiled(self, q: np.ndarray, p: np.ndarray) -> np.ndarray | None:
+        """The output by compiled C whatever the batch size, or None without a kernel."""
+        if not self._use_native(COMPILE_MIN_POSES, p.size):
+            return None
+        out = np.empty((q.shape[0], *self.shape))
+        self._native(q, p, out)
+        return out
 
     def _use_native(self, n: int, n_p: int) -> bool:
         backend = os.environ.get("CASECAL_BACKEND", "auto")

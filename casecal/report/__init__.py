@@ -30,6 +30,18 @@ STUDIES: dict[str, Callable] = {
     "calibrate_until": enough_poses,
     "relative": relative_measurements,
 }
+NAMES = {
+    "table1": "the paper's Table 1",
+    "planar_arms": "planar arms",
+    "scara": "SCARA observability",
+    "pose_count": "pose count",
+    "noise": "noise",
+    "six_axis": "six-axis arms with Hayati's beta",
+    "optimal_poses": "optimal poses",
+    "calibrate_until": "calibrate until a target",
+    "relative": "relative measurements",
+}
+"""Each study in words, as ``casecal report --help`` and the title page name them."""
 PDF_TABLES = {"table1", "scara_blind_spots", "six_axis_observability"}
 
 
@@ -117,7 +129,7 @@ def build_report(
         f"NumPy {numpy.__version__}; SciPy {scipy.__version__}; pandas {pandas.__version__}",
         f"Machine: {platform.machine()}, {platform.system()}; executor: {executor}"
         + (f" ({scheduler})" if isinstance(scheduler, str) else ""),
-        f"Grid: {'quick' if quick else 'full'}; studies: {', '.join(STUDIES)}; "
+        f"Grid: {'quick' if quick else 'full'}; studies: {'; '.join(NAMES[n] for n in STUDIES)}; "
         f"computed in {elapsed:.0f} s",
         "",
         "Starting point: N. W. Simpson and M. J. D. Hayes, 'Kinematic Calibration of Industrial "

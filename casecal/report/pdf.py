@@ -1,8 +1,13 @@
-"""Assemble the studies' figures and tables into one PDF (matplotlib's PdfPages, no LaTeX)."""
+"""Assemble the studies' figures and tables into one PDF (matplotlib's PdfPages, no LaTeX).
+
+Figures and tables flow down A4 portrait pages: a block (heading, content, caption) goes
+below the previous one when it fits, else on a new page, so no page is left mostly blank.
+"""
 
 from __future__ import annotations
 
 import textwrap
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import matplotlib.image as mpimg
@@ -10,8 +15,50 @@ import matplotlib.pyplot as plt
 from matplotlib.backends.backend_pdf import PdfPages
 
 from .common import Figure, StudyResult, Table
+from .pdf_table import draw_table, table_height
 
-A4 = (8.27, 11.69)
+A4 = (8.27, 11.69)  # inches
+MARGIN = 0.05  # of the page height, top and bottom
+LEFT = 0.08  # of the page width
+GAP = 0.025  # between blocks, of the page height
+CAPTION_PT = 9
+LINE = CAPTION_PT * 1.4 / 72 / A4[1]  # one caption line, of the page height
+HEADING = 0.03
+
+
+@dataclass
+class Layout:
+    """Where blocks went: per page, the fraction of its height they fill."""
+
+    filled: list[float] = field(default_factory=list)
+
+
+class _Flow:
+    """A cursor down the current page; opens a new page when a block does not fit."""
+
+    def __init__(self, pdf: PdfPages, layout: Layout):
+        self.pdf, self.layout, self.fig, self.y = pdf, layout, None, 0.0
+
+    def place(self, height: float):
+        """The figure and the top (fraction) of a free band of `height`."""
+        if self.fig is None or self.y - height < MARGIN:
+            self.close()
+            self.fig, self.y = plt.figure(figsize=A4), 1 - MARGIN
+        top = self.y
+        self.y -= height + GAP
+        return self.fig, top
+
+    @property
+    def room(self) -> float:
+        """Height left on the current page (0 before the first)."""
+        return 0.0 if self.fig is None else self.y - MARGIN
+
+    def close(self) -> None:
+        if self.fig is not None:
+            self.layout.filled.append((1 - MARGIN - self.y - GAP) / (1 - 2 * MARGIN))
+            self.pdf.savefig(self.fig)
+            plt.close(self.fig)
+            self.fig = None
 
 
 def _title_page(pdf: PdfPages, title: str, lines: list[str]) -> None:
@@ -31,80 +78,72 @@ def _title_page(pdf: PdfPages, title: str, lines: list[str]) -> None:
     plt.close(fig)
 
 
-def _caption(fig, text: str, y: float, width: int = 105) -> None:
-    wrapped = "\n".join(textwrap.wrap(text, width))
-    fig.text(0.08, y, wrapped, fontsize=9, va="top", linespacing=1.4)
+def _wrap(text: str, width: int = 105) -> str:
+    return "\n".join(textwrap.wrap(text, width))
 
 
-def _figure_page(pdf: PdfPages, number: int, figure: Figure) -> None:
-    fig = plt.figure(figsize=A4)
+def _caption(fig, text: str, top: float) -> None:
+    fig.text(LEFT, top, _wrap(text), fontsize=CAPTION_PT, va="top", linespacing=1.4)
+
+
+def _caption_height(text: str) -> float:
+    return (_wrap(text).count("\n") + 1) * LINE
+
+
+def _figure_block(flow: _Flow, number: int, figure: Figure) -> None:
     img = mpimg.imread(figure.path)
     h, w = img.shape[:2]
     width = 0.84
     height = min(width * h / w * A4[0] / A4[1], 0.55)
+    rest = HEADING + 0.01 + _caption_height(figure.caption)
+    if height + rest > flow.room >= 0.75 * height + rest:
+        height = flow.room - rest  # a little smaller rather than a half-empty page
     width = height * w / h * A4[1] / A4[0]
-    ax = fig.add_axes([(1 - width) / 2, 0.88 - height, width, height])
+    fig, top = flow.place(height + rest)
+    fig.text(LEFT, top - 0.015, f"Figure {number}. {figure.title}", fontsize=12, weight="bold")
+    ax = fig.add_axes([(1 - width) / 2, top - HEADING - height, width, height])
     ax.imshow(img)
     ax.axis("off")
-    fig.text(0.08, 0.93, f"Figure {number}. {figure.title}", fontsize=12, weight="bold")
-    _caption(fig, figure.caption, 0.86 - height)
-    pdf.savefig(fig)
-    plt.close(fig)
+    _caption(fig, figure.caption, top - HEADING - height - 0.01)
 
 
-def _table_page(pdf: PdfPages, number: int, tab: Table, max_rows: int = 30) -> None:
+def _table_block(flow: _Flow, number: int, tab: Table, max_rows: int = 30) -> None:
     df = (tab.shown if tab.shown is not None else tab.frame).head(max_rows)
-    fig = plt.figure(figsize=(A4[1], A4[0]))  # landscape: tables are wide
-    fig.text(0.05, 0.93, f"Table {number}. {tab.title}", fontsize=12, weight="bold")
-    ax = fig.add_axes([0.03, 0.32, 0.94, 0.56])
-    ax.axis("off")
-    cells = [[_cell(v) for v in row] for row in df.itertuples(index=False)]
-    t = ax.table(
-        cellText=cells,
-        colLabels=[str(c) for c in df.columns],
-        loc="upper center",
-        cellLoc="right",
-        colLoc="center",
-    )
-    t.auto_set_font_size(False)
-    t.set_fontsize(7.5)
-    t.auto_set_column_width(list(range(len(df.columns))))
-    t.scale(1.0, 1.5)
-    for (row, col), cell in t.get_celld().items():
-        if row > 0 and isinstance(df.iloc[row - 1, col], str):
-            cell._loc = "left"  # text reads from the left; numbers align on the right
-    _caption(fig, tab.caption, 0.28, width=150)
-    pdf.savefig(fig)
-    plt.close(fig)
-
-
-def _cell(v) -> str:
-    if isinstance(v, float):
-        if v == 0 or 1e-3 <= abs(v) < 1e4:
-            return f"{v:.6f}"
-        return f"{v:.3e}"
-    return str(v)
+    body = table_height(df, A4)
+    fig, top = flow.place(HEADING + body + 0.01 + _caption_height(tab.caption))
+    fig.text(LEFT, top - 0.015, f"Table {number}. {tab.title}", fontsize=12, weight="bold")
+    draw_table(fig, df, top - HEADING, A4)
+    _caption(fig, tab.caption, top - HEADING - body - 0.01)
 
 
 def write_pdf(
-    path: Path, title: str, settings: list[str], studies: list[StudyResult], table_names: set[str]
+    path: Path,
+    title: str,
+    settings: list[str],
+    studies: list[StudyResult],
+    table_names: set[str],
+    layout: Layout | None = None,
 ) -> int:
     """Write the report; returns the number of figures in it.
 
     Only tables whose CSV stem is in `table_names` are set as PDF tables (the trial-level
-    CSVs are data, not reading).
+    CSVs are data, not reading). `layout`, when given, receives how full each page after
+    the title page is.
     """
+    layout = layout if layout is not None else Layout()
     n_fig = n_tab = 0
     with PdfPages(path) as pdf:
         _title_page(pdf, title, settings)
+        flow = _Flow(pdf, layout)
         for study in studies:
             for tab in study.tables:
                 if tab.path.stem in table_names:
                     n_tab += 1
-                    _table_page(pdf, n_tab, tab)
+                    _table_block(flow, n_tab, tab)
             for figure in study.figures:
                 n_fig += 1
-                _figure_page(pdf, n_fig, figure)
+                _figure_block(flow, n_fig, figure)
+        flow.close()
         info = pdf.infodict()
         info["Title"] = title
         info["Creator"] = "casecal report"
