@@ -34,6 +34,7 @@ _PUBLIC = {
     "read_csv": "data.files",
     "robot_to_toml": "model.catalog",
     "robots": "model.catalog",
+    "save_robot": "model.save",
     "simulate": "data.measurements",
     "validate": "identification.validation",
     "write_csv": "data.files",

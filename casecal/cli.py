@@ -24,7 +24,7 @@ from .errors import CalibrationError
 from .identification.analysis import observability
 from .identification.fit import DEFAULT_METHOD, METHODS, identify
 from .identification.validation import split, validate
-from .model.catalog import load_deviations, load_robot, robot_to_toml, robots
+from .model.catalog import load_deviations, load_robot, robots
 from .model.parameters import unit
 
 _LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
@@ -206,7 +206,16 @@ def _write_calibrated(args: argparse.Namespace, robot) -> None:
 
 
 def _robot_text(args: argparse.Namespace, robot) -> str:
-    return robot_to_toml(dataclasses.replace(robot, calibrated_from=args.robot, auto_beta=False))
+    """The -o file's text in the format its extension names (.toml, .urdf); what that
+    format cannot hold is said on standard error."""
+    from .model.save import robot_text
+
+    text, notes = robot_text(
+        dataclasses.replace(robot, calibrated_from=args.robot, auto_beta=False), args.output
+    )
+    for note in notes:
+        print(f"note: {args.output}: {note}", file=sys.stderr)
+    return text
 
 
 def _write_outputs(args: argparse.Namespace, cal) -> None:
@@ -355,6 +364,27 @@ def _cmd_robots(args: argparse.Namespace) -> None:
         print("  ".join([*cells, src]).rstrip())
 
 
+def _show_urdf(robot, deg: float, mm: float) -> None:
+    print(f"{robot.name}: {robot.full_name or robot.name}")
+    joints = "1 joint" if robot.dof == 1 else f"{robot.dof} joints"
+    print(f"{joints} ({robot.joint_types}), URDF joint origins; mm and degrees")
+    print()
+    print(
+        f"{'joint':<24} {'type':>4} {'x':>10} {'y':>10} {'z':>10} "
+        f"{'roll':>10} {'pitch':>10} {'yaw':>10}  axis"
+    )
+    for j in robot.joints:
+        numbers = (
+            " ".join(_fmt(v * mm) for v in j.xyz) + " " + " ".join(_fmt(v * deg) for v in j.rpy)
+        )
+        axis = ", ".join(f"{v:g}" for v in j.axis)
+        print(f"{j.name:<24} {j.type:>4} {numbers}  ({axis})")
+    for label, frame in (("base", robot.base), ("tool", robot.tool)):
+        xyz = ", ".join(f"{v * mm:.4f}" for v in frame.xyz)
+        rpy = ", ".join(f"{v * deg:.4f}" for v in frame.rpy)
+        print(f"{label}: xyz = ({xyz}) mm, rpy = ({rpy}) deg")
+
+
 def _fmt(value: float, width: int = 10) -> str:
     return f"{value:{width}.4f}"
 
@@ -362,6 +392,9 @@ def _fmt(value: float, width: int = 10) -> str:
 def _cmd_show(args: argparse.Namespace) -> None:
     robot = load_robot(args.robot)
     deg, mm = 180.0 / math.pi, 1e3
+    if robot.convention == "urdf":
+        _show_urdf(robot, deg, mm)
+        return
     conv = "standard DH" if robot.convention == "dh" else "modified DH (Craig)"
     print(f"{robot.name}: {robot.full_name or robot.name}")
     joints = "1 joint" if robot.dof == 1 else f"{robot.dof} joints"
@@ -458,7 +491,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Print the DH table (theta, d, a, alpha, Hayati beta, joint limits) of a "
         "catalog robot or a robot TOML file, in mm and degrees, with its source.",
     )
-    p.add_argument("robot", metavar="NAME|FILE", help="catalog name (e.g. scorbot) or .toml path")
+    p.add_argument(
+        "robot", metavar="NAME|FILE", help="catalog name (e.g. scorbot), .toml or .urdf path"
+    )
     p.set_defaults(func=_cmd_show)
 
     def add_schedule(p, default_poses):
@@ -492,7 +527,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulate measured tool-point positions of a robot whose parameters "
         "deviate from nominal, and write them as CSV (joints in deg/mm, positions in mm).",
     )
-    p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path (the nominal robot)")
+    p.add_argument(
+        "robot", metavar="ROBOT", help="catalog name, .toml or .urdf path (the nominal robot)"
+    )
     add_schedule(p, 100)
     p.add_argument(
         "--deviations",
@@ -516,7 +553,9 @@ def build_parser() -> argparse.ArgumentParser:
         "a summary (mm, degrees) with standard errors and what the data cannot see, and "
         "optionally write the calibrated robot as TOML.",
     )
-    p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path (nominal robot)")
+    p.add_argument(
+        "robot", metavar="ROBOT", help="catalog name, .toml or .urdf path (nominal robot)"
+    )
     p.add_argument(
         "measurements",
         metavar="CSV",
@@ -585,7 +624,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="fail (exit 2, nothing written) if any asked-for parameter cannot be identified, "
         "instead of holding it at nominal and saying so",
     )
-    p.add_argument("-o", "--output", metavar="TOML", help="write the calibrated robot here")
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="FILE",
+        help="write the calibrated robot here: .toml, or .urdf (a URDF robot's own file with "
+        "the calibrated numbers; a DH robot as a new URDF)",
+    )
     p.set_defaults(func=_cmd_identify)
 
     p = command(
@@ -594,7 +639,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Rank, identifiable and unidentifiable parameters, blind combinations in "
         "words, and observability indices O1-O5 of a pose schedule.",
     )
-    p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path")
+    p.add_argument("robot", metavar="ROBOT", help="catalog name, .toml or .urdf path")
     add_schedule(p, 100)
     p.add_argument("--parameters", default=None, help=params_help)
     p.set_defaults(func=_cmd_observability)
@@ -607,7 +652,9 @@ def build_parser() -> argparse.ArgumentParser:
         "batch, and stop when the predicted 95 % position error on new poses is under the "
         "threshold. Prints how many poses it took.",
     )
-    p.add_argument("robot", metavar="ROBOT", help="catalog name or .toml path (nominal robot)")
+    p.add_argument(
+        "robot", metavar="ROBOT", help="catalog name, .toml or .urdf path (nominal robot)"
+    )
     p.add_argument("pool", metavar="CSV", help="measured poses to choose from")
     p.add_argument(
         "--threshold", default="0.1mm", help="predicted 95 %% error to reach (default 0.1mm)"
@@ -621,7 +668,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="how to choose the next poses (default optimal)",
     )
     p.add_argument("--parameters", default=None, help=params_help)
-    p.add_argument("-o", "--output", metavar="TOML", help="write the calibrated robot here")
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="FILE",
+        help="write the calibrated robot here: .toml, or .urdf (a URDF robot's own file with "
+        "the calibrated numbers; a DH robot as a new URDF)",
+    )
     p.set_defaults(func=_cmd_calibrate_until)
 
     p = command(

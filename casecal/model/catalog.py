@@ -74,13 +74,18 @@ def robots() -> list[str]:
     return sorted(p.name[:-5] for p in _catalog_dir().iterdir() if p.name.endswith(".toml"))
 
 
-def load_robot(name_or_path: str | Path) -> Robot:
-    """Load a robot from the catalog by name, or from a TOML file by path.
+def load_robot(
+    name_or_path: str | Path, base_link: str | None = None, tip_link: str | None = None
+) -> Robot:
+    """Load a robot from the catalog by name, or from a TOML or URDF file by path.
 
     Parameters
     ----------
     name_or_path : str or path
-        A catalog name (see `robots`) or the path of a robot file (schema in the module doc).
+        A catalog name (see `robots`), the path of a robot file (schema in the module doc),
+        or of a ``.urdf`` (or ``.xacro``, with the xacro extra) file.
+    base_link, tip_link : str, optional
+        URDF only: the chain's ends (defaults in `casecal.model.urdf.read_urdf`).
 
     Returns
     -------
@@ -94,6 +99,12 @@ def load_robot(name_or_path: str | Path) -> Robot:
     """
     text = str(name_or_path)
     path = Path(text)
+    if path.suffix in (".urdf", ".xacro"):
+        from .urdf import load_urdf
+
+        return load_urdf(path, base_link, tip_link)
+    if base_link is not None or tip_link is not None:
+        raise CalibrationError("base_link= and tip_link= apply to URDF files only")
     if path.suffix == ".toml" or path.exists() or "/" in text or "\\" in text:
         label, source = str(path), read_text(path, "robot file")
     else:
@@ -122,9 +133,9 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
             '"mdh" (modified/Craig) - the same numbers mean different robots'
         )
     convention = data["convention"]
-    if convention not in ("dh", "mdh"):
+    if convention not in ("dh", "mdh", "urdf"):
         raise CalibrationError(
-            f'{label}: convention = {convention!r} is unknown; use "dh" or "mdh"'
+            f'{label}: convention = {convention!r} is unknown; use "dh", "mdh" or "urdf"'
         )
     rows = data.get("joints")
     if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
@@ -134,6 +145,11 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     joints = []
     for i, row in enumerate(rows, start=1):
         where = f"joints[{i}]"
+        if convention == "urdf":
+            from .urdf import joint_from_row
+
+            joints.append(joint_from_row(row, where, length, angle, label, _number))
+            continue
         _no_unknown(row, _JOINT_KEYS, label, where)
         jtype = row.get("type")
         if jtype not in ("R", "P"):
@@ -259,6 +275,11 @@ def robot_to_toml(robot: Robot) -> str:
     if robot.calibrated_from:
         lines.append(f"calibrated_from = {_q(robot.calibrated_from)}")
     for j in robot.joints:
+        if robot.convention == "urdf":
+            from .urdf import joint_to_lines
+
+            lines += ["", "[[joints]]", *joint_to_lines(j, _q)]
+            continue
         lines += [
             "",
             "[[joints]]",

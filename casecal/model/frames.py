@@ -26,7 +26,8 @@ def matrix_from_rpy(rpy) -> np.ndarray:
 
 def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:
     """Inverse of `matrix_from_rpy` (ry in [-π/2, π/2]); rad."""
-    ry = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
+    # atan2 rather than arcsin(-R[2, 0]): arcsin loses half the digits near ±π/2
+    ry = float(np.arctan2(-R[2, 0], np.hypot(R[0, 0], R[1, 0])))
     rx = float(np.arctan2(R[2, 1], R[2, 2]))
     rz = float(np.arctan2(R[1, 0], R[0, 0]))
     return rx, ry, rz

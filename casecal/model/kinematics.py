@@ -46,7 +46,7 @@ import casadi as ca
 import numpy as np
 
 from . import _native
-from .parameters import parameter_names
+from .parameters import parameter_names, urdf_parameter_names
 
 log = logging.getLogger(__name__)
 
@@ -70,23 +70,29 @@ class Structure:
 
     Attributes
     ----------
-    convention : {"dh", "mdh"}
+    convention : {"dh", "mdh", "urdf"}
     joint_types : str
         One letter per joint, base to tip, ``"R"`` or ``"P"`` (e.g. ``"RRPR"``).
     beta_joints : tuple of int
         1-based indices of the links that carry a Hayati ``beta``.
     n_points : int
         Measured points on the tool (0: the tool frame's origin).
+    joint_names, axes : tuple
+        URDF only: each movable joint's name and unit axis (in its own frame).
     """
 
     convention: str
     joint_types: str
     beta_joints: tuple[int, ...] = ()
     n_points: int = 0
+    joint_names: tuple[str, ...] = ()
+    axes: tuple[tuple[float, float, float], ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
         """Names of the full parameter vector (see `casecal.model.parameters`)."""
+        if self.convention == "urdf":
+            return urdf_parameter_names(self.joint_names, self.joint_types, self.n_points)
         return parameter_names(len(self.joint_types), self.beta_joints, self.n_points)
 
 
@@ -134,8 +140,29 @@ def link_transform(convention, joint_type, q, theta, d, a, alpha_cs, beta_cs=Non
     return rx @ tilt @ _trans(a, 0, 0) @ rz @ _trans(0, 0, d)
 
 
+def joint_motion(joint_type: str, axis, q) -> ca.SX:
+    """A URDF joint's motion: rotation by `q` about the unit `axis` (R, Rodrigues' formula)
+    or translation by `q` along it (P)."""
+    k = np.asarray(axis, dtype=float)
+    if joint_type == "P":
+        return _trans(*(k * q))
+    c, s = ca.cos(q), ca.sin(q)
+    T = ca.SX.eye(4)
+    skew = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    for i in range(3):
+        for j in range(3):
+            # exact zeros stay out of the graph: an axis along x, y or z gives the usual Rx..Rz
+            value = (1 - c) * k[i] * k[j] if k[i] * k[j] else 0
+            value = value + (c if i == j else 0) + (s * skew[i, j] if skew[i, j] else 0)
+            T[i, j] = value
+    return T
+
+
 def is_constant_angle(name: str) -> bool:
-    """Angles that do not combine with a joint variable: alpha, beta, base and tool rotations."""
+    """Angles that do not combine with a joint variable: alpha, beta, base and tool
+    rotations, and the roll, pitch and yaw of a URDF joint's origin."""
+    if "." in name:
+        return name.rsplit(".", 1)[1] in ("roll", "pitch", "yaw")
     return name.startswith(("alpha", "beta", "base_r", "tool_r"))
 
 
@@ -186,6 +213,17 @@ class Chain:
             return frame_transform(xyz, [trig[f"{prefix}_r{a}"] for a in "xyz"])
 
         T = frame("base")
+        if structure.convention == "urdf":
+            for i, (jt, name, axis) in enumerate(
+                zip(structure.joint_types, structure.joint_names, structure.axes, strict=True)
+            ):
+                xyz = [P[f"{name}.{c}"] for c in "xyz"]
+                origin = frame_transform(
+                    xyz, [trig[f"{name}.{c}"] for c in ("roll", "pitch", "yaw")]
+                )
+                angle = q[i] + P[f"{name}.offset"] if jt == "R" else q[i]
+                T = T @ origin @ joint_motion(jt, axis, angle)
+            return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
         for i, jt in enumerate(structure.joint_types, start=1):
             T = T @ link_transform(
                 structure.convention,

@@ -8,6 +8,13 @@ The full parameter vector of a robot is, in this order:
   ``base_rz`` (rad);
 - the tool frame: ``tool_x`` … ``tool_rz``, likewise.
 
+A robot read from a URDF has, instead of the DH rows, per movable joint the six numbers of
+its origin in the file's own frames, named after the joint: ``{joint}.x``, ``.y``, ``.z``
+(m), ``.roll``, ``.pitch``, ``.yaw`` (rad), and for a revolute joint a zero offset of the
+joint angle, ``{joint}.offset`` (rad). (A prismatic joint has none: a constant along its
+axis is a shift of the origin, which x, y, z carry.) The set is redundant on purpose; the
+identifiability analysis reduces it to a base set.
+
 Lengths are in metres and angles in radians everywhere inside casecal.
 """
 
@@ -59,8 +66,30 @@ def parameter_names(
     return (*names, *frame_names("base"), *frame_names("tool"), *points)
 
 
+URDF_ORIGIN = ("x", "y", "z", "roll", "pitch", "yaw")
+
+
+def urdf_parameter_names(
+    joint_names: Sequence[str], joint_types: str, n_points: int = 0
+) -> tuple[str, ...]:
+    """Names of the full parameter vector of a URDF chain, in canonical order.
+
+    Per movable joint its origin ``{joint}.x`` … ``{joint}.yaw`` and, when revolute,
+    ``{joint}.offset``; then the base and tool frames and the points, as for DH.
+    """
+    names: list[str] = []
+    for joint, kind in zip(joint_names, joint_types, strict=True):
+        names += [f"{joint}.{c}" for c in URDF_ORIGIN]
+        if kind == "R":
+            names.append(f"{joint}.offset")
+    points = [f"point{k}_{a}" for k in range(1, n_points + 1) for a in "xyz"]
+    return (*names, *frame_names("base"), *frame_names("tool"), *points)
+
+
 def is_length(name: str) -> bool:
     """True for parameters measured in metres, False for those in radians."""
+    if "." in name:  # a URDF joint's origin: {joint}.x … {joint}.offset
+        return name.rsplit(".", 1)[1] in ("x", "y", "z")
     match = _JOINT_RE.match(name)
     if match:
         return match.group(1) in LENGTH_FAMILIES
@@ -136,8 +165,9 @@ def _match(names: Sequence[str], token: str) -> list[str]:
     family = token[:-1] if token.endswith("*") else token
     if family in JOINT_FAMILIES:
         return [n for n in names if (m := _JOINT_RE.match(n)) and m.group(1) == family]
+    # dotted names are a URDF joint's (a joint may be called base_joint or point_a)
     if family.rstrip("_") in ("base", "tool"):
-        return [n for n in names if n.startswith(family.rstrip("_") + "_")]
+        return [n for n in names if n.startswith(family.rstrip("_") + "_") and "." not in n]
     if family.rstrip("_") == "point":
-        return [n for n in names if n.startswith("point")]
+        return [n for n in names if n.startswith("point") and "." not in n]
     return [n for n in names if fnmatch.fnmatchcase(n, token)]

@@ -83,6 +83,9 @@ class Robot:
     points : tuple of (x, y, z)
         Measured points (reflectors) in the tool frame, m; empty: the tool frame's origin
         is what is measured. Each adds parameters ``point{k}_x/y/z``.
+    urdf : casecal.model.urdf.UrdfSource or None
+        For a robot read from a URDF: the text and the chain's ends, so that saving it
+        as URDF changes only the calibrated numbers.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -98,10 +101,11 @@ class Robot:
     confidence: str = ""
     points: tuple[tuple[float, float, float], ...] = ()
     calibrated_from: str = ""
+    urdf: object = None
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
-        if self.convention not in ("dh", "mdh"):
+        if self.convention not in ("dh", "mdh", "urdf"):
             raise CalibrationError(
                 f"robot {self.name!r}: convention {self.convention!r} is unknown; "
                 "use 'dh' (standard) or 'mdh' (modified/Craig)"
@@ -109,6 +113,14 @@ class Robot:
         joints = tuple(self.joints)
         if not joints:
             raise CalibrationError(f"robot {self.name!r} has no joints; give at least one")
+        if self.convention == "urdf":
+            from .urdf import check_joints
+
+            check_joints(self.name, joints)
+            object.__setattr__(self, "joints", joints)
+            object.__setattr__(self, "source", tuple(self.source))
+            object.__setattr__(self, "points", _points(self.name, self.points))
+            return
         for i, joint in enumerate(joints, start=1):
             if joint.type not in ("R", "P"):
                 raise CalibrationError(
@@ -128,10 +140,7 @@ class Robot:
             )
         object.__setattr__(self, "joints", joints)
         object.__setattr__(self, "source", tuple(self.source))
-        points = tuple(tuple(float(v) for v in p) for p in self.points)
-        if any(len(p) != 3 or not all(math.isfinite(v) for v in p) for p in points):
-            raise CalibrationError(f"robot {self.name!r}: every point needs 3 finite numbers (m)")
-        object.__setattr__(self, "points", points)
+        object.__setattr__(self, "points", _points(self.name, self.points))
 
     # --- description ------------------------------------------------------------------
 
@@ -148,6 +157,14 @@ class Robot:
     @property
     def structure(self) -> kinematics.Structure:
         """What the CasADi graph depends on (everything but the numbers)."""
+        if self.convention == "urdf":
+            return kinematics.Structure(
+                "urdf",
+                self.joint_types,
+                n_points=len(self.points),
+                joint_names=tuple(j.name for j in self.joints),
+                axes=tuple(j.axis for j in self.joints),
+            )
         betas = tuple(i for i, j in enumerate(self.joints, start=1) if j.beta is not None)
         return kinematics.Structure(self.convention, self.joint_types, betas, len(self.points))
 
@@ -165,6 +182,9 @@ class Robot:
         """The full parameter vector, shape (n_params,), in the order of `parameter_names`."""
         values: list[float] = []
         for j in self.joints:
+            if self.convention == "urdf":
+                values += [*j.xyz, *j.rpy] + ([j.offset] if j.type == "R" else [])
+                continue
             values += [j.theta, j.d, j.a, j.alpha]
             if j.beta is not None:
                 values.append(j.beta)
@@ -205,7 +225,9 @@ class Robot:
         total = float(np.linalg.norm(self.tool.xyz))
         total += max((float(np.linalg.norm(p)) for p in self.points), default=0.0)
         for j in self.joints:
-            total += abs(j.a) + abs(j.d)
+            total += (
+                float(np.linalg.norm(j.xyz)) if self.convention == "urdf" else abs(j.a) + abs(j.d)
+            )
             if j.type == "P":
                 if j.limits is None:
                     return None
@@ -232,6 +254,16 @@ class Robot:
             p[name] = value
         joints = []
         for i, j in enumerate(self.joints, start=1):
+            if self.convention == "urdf":
+                joints.append(
+                    dataclasses.replace(
+                        j,
+                        xyz=tuple(p[f"{j.name}.{c}"] for c in "xyz"),
+                        rpy=tuple(p[f"{j.name}.{c}"] for c in ("roll", "pitch", "yaw")),
+                        offset=p[f"{j.name}.offset"] if j.type == "R" else 0.0,
+                    )
+                )
+                continue
             beta = p[f"beta{i}"] if j.beta is not None else None
             joints.append(
                 dataclasses.replace(
@@ -368,6 +400,13 @@ class Robot:
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, {self.joint_types}, convention={self.convention!r})"
+
+
+def _points(name: str, points) -> tuple[tuple[float, float, float], ...]:
+    points = tuple(tuple(float(v) for v in p) for p in points)
+    if any(len(p) != 3 or not all(math.isfinite(v) for v in p) for p in points):
+        raise CalibrationError(f"robot {name!r}: every point needs 3 finite numbers (m)")
+    return points
 
 
 def check_joint_values(q, dof: int) -> tuple[np.ndarray, bool]:

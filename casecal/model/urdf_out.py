@@ -1,0 +1,190 @@
+"""Robots out as URDF: the input file with only the calibrated numbers changed, or a new
+URDF of a DH chain.
+
+A URDF has no joint offset and no instrument frame: a calibrated offset is folded into its
+joint's origin (exact: the origin turns about the joint's own axis), the tool frame into
+the last fixed joint after the chain when there is one, and what cannot be written (the
+base frame, measured points) is returned as notes for the caller to say.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..errors import CalibrationError
+from .urdf import chain_path, parse, split, transform
+
+
+def _fmt(values) -> str:
+    return " ".join(repr(float(v)) if v != 0 else "0" for v in values)
+
+
+def _rotation_about(axis, angle: float) -> np.ndarray:
+    k = np.asarray(axis, dtype=float)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    T = np.eye(4)
+    T[:3, :3] = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+    return T
+
+
+def _set_origin(text: str, joint: str, xyz, rpy) -> str:
+    """`text` with the origin of `<joint name="joint">` set to `xyz`, `rpy`."""
+    start = re.search(r"<joint\b[^>]*\bname\s*=\s*([\"'])" + re.escape(joint) + r"\1[^>]*>", text)
+    if start is None:
+        raise CalibrationError(f"internal error: joint {joint!r} not found in the URDF text")
+    end = text.find("</joint>", start.end())
+    body = text[start.end() : end]
+    origin = f'xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"'
+    found = re.search(r"<origin\b([^>]*?)(/?)>", body)
+    if found is None:
+        body = f"\n    <origin {origin}/>" + body
+    else:
+        attrs = re.sub(r"\s*\b(xyz|rpy)\s*=\s*([\"']).*?\2", "", found.group(1))
+        body = (
+            body[: found.start()]
+            + f"<origin {origin}{attrs}{found.group(2)}>"
+            + body[found.end() :]
+        )
+    return text[: start.end()] + body + text[end:]
+
+
+def calibrated_urdf(robot) -> tuple[str, list[str]]:
+    """The URDF text of `robot` (read from a URDF) with its calibrated numbers, and notes.
+
+    Returns
+    -------
+    text : str
+    notes : list of str
+        What the file cannot hold and where it went instead (one sentence each).
+    """
+    source = robot.urdf
+    _, joints = parse(source.text, "URDF")
+    path, _, _ = chain_path(joints, source.base_link, source.tip_link, "URDF")
+    text, notes, pending, fixed_after = source.text, [], np.eye(4), []
+    movable = {j.name: j for j in robot.joints}
+    offsets = []
+    for j in path:
+        if j.name not in movable:
+            pending = pending @ j.T
+            fixed_after.append(j)
+            continue
+        cj = movable[j.name]
+        T = transform(cj.xyz, cj.rpy) @ _rotation_about(cj.axis, cj.offset)
+        xyz, rpy = split(np.linalg.inv(pending) @ T)
+        text = _set_origin(text, j.name, xyz, rpy)
+        if cj.offset:
+            offsets.append(j.name)
+        pending, fixed_after = np.eye(4), []
+    if offsets:
+        notes.append(
+            "a URDF has no joint offset: the calibrated offsets of "
+            f"{', '.join(offsets)} are folded into their joints' origins (exact)"
+        )
+    tool = transform(robot.tool.xyz, robot.tool.rpy)
+    if fixed_after:
+        before = np.eye(4)
+        for j in fixed_after[:-1]:
+            before = before @ j.T
+        xyz, rpy = split(np.linalg.inv(before) @ tool)
+        text = _set_origin(text, fixed_after[-1].name, xyz, rpy)
+    elif not np.allclose(tool, np.eye(4), rtol=0, atol=1e-15):
+        notes.append("the tool frame is not written: the chain ends at a movable joint")
+    if not np.allclose(transform(robot.base.xyz, robot.base.rpy), np.eye(4), rtol=0, atol=1e-15):
+        notes.append(
+            "the base frame (instrument to the base link) is not part of the robot and is "
+            "not written; it is in the TOML output"
+        )
+    if robot.points:
+        notes.append(
+            "the measured points (reflectors) are not written: a URDF has no place for them"
+        )
+    return text, notes
+
+
+def _dh_pieces(robot, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """(Pre, Post) of joint `i` (0-based): link = Pre · Motion(q) · Post, motion along z."""
+
+    def rz(t):
+        return transform((0, 0, 0), (0, 0, t))
+
+    def rx(t):
+        return transform((0, 0, 0), (t, 0, 0))
+
+    def ry(t):
+        return transform((0, 0, 0), (0, t, 0))
+
+    def tr(x, z):
+        return transform((x, 0, z), (0, 0, 0))
+
+    j = robot.joints[i]
+    beta = ry(j.beta or 0.0)
+    if robot.convention == "dh":
+        if j.type == "R":
+            return rz(j.theta), tr(0, j.d) @ tr(j.a, 0) @ rx(j.alpha) @ beta
+        return rz(j.theta) @ tr(0, j.d), tr(j.a, 0) @ rx(j.alpha) @ beta
+    head = rx(j.alpha) @ beta @ tr(j.a, 0) @ rz(j.theta)
+    if j.type == "R":
+        return head, tr(0, j.d)
+    return head @ tr(0, j.d), np.eye(4)
+
+
+def _chain_rows(robot):
+    """Per joint (name, kind letter, origin T, axis, limits), and the transform left over
+    after the last joint (to be followed by the tool frame)."""
+    rows, post = [], np.eye(4)
+    for i, j in enumerate(robot.joints):
+        if robot.convention == "urdf":
+            T = transform(j.xyz, j.rpy) @ _rotation_about(j.axis, j.offset)
+            rows.append((j.name, j.type, T, j.axis, j.limits))
+            continue
+        pre, after = _dh_pieces(robot, i)
+        rows.append((f"joint{i + 1}", j.type, post @ pre, (0.0, 0.0, 1.0), j.limits))
+        post = after
+    return rows, post
+
+
+def new_urdf(robot) -> tuple[str, list[str]]:
+    """A URDF of `robot`'s chain: base_link, one link per joint, tool0; a ``world`` link
+    when the base frame is not the identity. DH joints turn (or slide) about their z axes."""
+    rows, post = _chain_rows(robot)
+    links = ["base_link", *(f"link{i}" for i in range(1, robot.dof + 1)), "tool0"]
+    base = transform(robot.base.xyz, robot.base.rpy)
+    world = not np.allclose(base, np.eye(4), rtol=0, atol=1e-15)
+    lines = ['<?xml version="1.0"?>', f'<robot name="{robot.name}">']
+    lines += [f'  <link name="{name}"/>' for name in (["world"] if world else []) + links]
+
+    def joint(name, kind, parent, child, T, axis=None, limits=None):
+        xyz, rpy = split(T)
+        out = [
+            f'  <joint name="{name}" type="{kind}">',
+            f'    <parent link="{parent}"/>',
+            f'    <child link="{child}"/>',
+            f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>',
+        ]
+        if axis is not None:
+            out.append(f'    <axis xyz="{_fmt(axis)}"/>')
+        if limits is not None:
+            out.append(
+                f'    <limit lower="{limits[0]!r}" upper="{limits[1]!r}" effort="0" velocity="0"/>'
+            )
+        return [*out, "  </joint>"]
+
+    if world:
+        lines += joint("world_to_base", "fixed", "world", "base_link", base)
+    for i, (name, letter, T, axis, limits) in enumerate(rows):
+        kind = "prismatic" if letter == "P" else ("revolute" if limits else "continuous")
+        lines += joint(name, kind, links[i], links[i + 1], T, axis, limits)
+    tool = post @ transform(robot.tool.xyz, robot.tool.rpy)
+    lines += joint("tool", "fixed", links[-2], "tool0", tool)
+    lines.append("</robot>")
+    notes = ["the measured points (reflectors) are not written"] if robot.points else []
+    return "\n".join(lines) + "\n", notes
+
+
+def robot_to_urdf(robot) -> tuple[str, list[str]]:
+    """URDF text of `robot` and notes on what it cannot hold (see the module doc)."""
+    if robot.urdf is not None:
+        return calibrated_urdf(robot)
+    return new_urdf(robot)

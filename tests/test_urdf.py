@@ -1,0 +1,168 @@
+"""Robots in as URDF and out as URDF (issue 11), checked against roboticstoolbox-python's
+URDF reader and the URDFs its data package ships."""
+
+from __future__ import annotations
+
+import difflib
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import casecal as cc
+from casecal.cli import main
+from casecal.model.urdf import transform
+
+rtbdata = pytest.importorskip("rtbdata")
+rtb = pytest.importorskip("roboticstoolbox")
+URDFS = sorted((Path(rtbdata.__file__).parent / "xacro").glob("*/**/*.urdf"))
+KR16 = next(p for p in URDFS if p.name == "kr16_2.urdf")
+
+
+def oracle(path: Path):
+    """roboticstoolbox's forward kinematics of a URDF file (meshes dropped: they point to
+    ROS packages that are not installed, and do not move anything)."""
+    from roboticstoolbox.models.URDF.URDFRobot import _parse_urdf
+
+    text = re.sub(r"<(visual|collision)\b.*?</\1>", "", path.read_text(), flags=re.S)
+    links, name = _parse_urdf(text, source=str(path))
+    robot = rtb.Robot(links, name=name)
+    return lambda q, tip: np.array([robot.fkine(row, end=tip).A for row in q])
+
+
+def tip_of(robot) -> str:
+    return robot.urdf.tip_link if robot.urdf is not None else "tool0"
+
+
+@pytest.mark.parametrize("path", URDFS, ids=lambda p: p.name)
+def test_forward_kinematics_agrees_with_roboticstoolbox(path):
+    robot = cc.load_robot(path)
+    q = cc.poses.uniform(robot, 40, seed=0)
+    assert np.abs(oracle(path)(q, tip_of(robot)) - robot.fk(q)).max() < 1e-12
+
+
+def test_names_and_patterns():
+    robot = cc.load_robot(KR16)
+    assert robot.dof == 6 and robot.convention == "urdf"
+    assert robot.urdf.tip_link == "tool0"  # the one chain, then its fixed links
+    offsets = [n for n in robot.parameter_names if n.endswith(".offset")]
+    _, names = robot.position_jacobian(np.zeros(6), "*.offset")
+    assert names == offsets == [f"joint_a{i}.offset" for i in range(1, 7)]
+    _, names = robot.position_jacobian(np.zeros(6), "base_*")
+    assert names == [f"base_{a}" for a in ("x", "y", "z", "rx", "ry", "rz")]
+
+
+def _session(robot, n, seed, orientation=False):
+    rng = np.random.default_rng(seed)
+    deviations = {
+        n: rng.normal() * 1e-3  # about 1 mm and 1 mrad on every joint origin
+        for n in robot.parameter_names
+        if "." in n
+    }
+    deviations.update(base_x=2.1, base_y=-0.8, base_z=0.3, base_rz=2.2)  # a tracker 2 m away
+    true = robot.with_deviations(deviations)
+    q = cc.poses.uniform(robot, n, seed=seed + 1)
+    extra = {"orientation_noise": 2e-5} if orientation else {}
+    return true, cc.simulate(true, q, noise=2e-5, seed=seed + 2, **extra)
+
+
+@pytest.mark.parametrize("orientation, count", [(False, 27), (True, 30)])
+def test_every_joint_origin_with_a_base_and_a_marker_reaches_the_noise(orientation, count):
+    """The redundant URDF set (7 per joint) reduces to the DH count by itself: 4 per
+    revolute joint and 6 for the base, less the 3 tool rotations positions cannot see."""
+    robot = cc.load_robot(KR16).with_points([[0.05, 0.02, 0.03]])
+    true, meas = _session(robot, 80, seed=0, orientation=orientation)
+    cal = cc.identify(robot, meas, "all")
+    assert cal.success, cal.message
+    assert len(cal.estimated) == count
+    q = cc.poses.uniform(robot, 300, seed=9)
+    err = cal.robot.measured_points(q) - true.measured_points(q)
+    held_out = np.sqrt(np.mean(np.sum(err**2, axis=-1)))
+    assert held_out < 0.02e-3 * np.sqrt(3)  # m: below one measurement's noise
+
+
+def test_the_calibrated_urdf_changes_only_the_origins_and_reads_back(tmp_path):
+    robot = cc.load_robot(KR16)
+    _, meas = _session(robot, 60, seed=3)
+    cal = cc.identify(robot, meas, "all")
+    assert cal.success
+    notes = cc.save_robot(cal.robot, tmp_path / "calibrated.urdf")
+    assert any("base frame" in n for n in notes)
+    q = cc.poses.uniform(robot, 50, seed=4)
+    theirs = oracle(tmp_path / "calibrated.urdf")(q, "tool0")
+    # the base frame (the tracker's) stays out of the URDF: compare in the base link's frame
+    base = transform(cal.robot.base.xyz, cal.robot.base.rpy)
+    ours = np.linalg.inv(base)[None] @ cal.robot.fk(q)
+    assert np.abs(theirs[:, :3, 3] - ours[:, :3, 3]).max() < 1e-9
+    before = KR16.read_text().splitlines()
+    after = (tmp_path / "calibrated.urdf").read_text().splitlines()
+    changed = [
+        line
+        for line in difflib.unified_diff(before, after, lineterm="", n=0)
+        if line[:1] in "+-" and line[:3] not in ("+++", "---")
+    ]
+    assert len(before) == len(after)
+    assert changed and all("<origin" in line for line in changed)
+
+
+@pytest.mark.parametrize("name", ["puma560", "kr15_2", "scorbot", "irb120", "rx90b"])
+def test_a_dh_robot_exports_the_same_chain(tmp_path, name):
+    robot = cc.load_robot(name)
+    robot = robot.with_deviations({n: 1e-3 for n in robot.parameter_names})
+    cc.save_robot(robot, tmp_path / "r.urdf")
+    q = cc.poses.uniform(robot, 40, seed=1)
+    assert np.abs(oracle(tmp_path / "r.urdf")(q, "tool0") - robot.fk(q)).max() < 1e-12
+    assert np.abs(cc.load_robot(tmp_path / "r.urdf").fk(q) - robot.fk(q)).max() < 1e-12
+
+
+def test_dh_and_its_urdf_calibrate_alike(tmp_path):
+    dh = cc.load_robot("puma560").with_points([[0.05, 0.0, 0.1]])
+    cc.save_robot(dh, tmp_path / "puma.urdf")
+    urdf = cc.load_robot(tmp_path / "puma.urdf").with_points([[0.05, 0.0, 0.1]])
+    rng = np.random.default_rng(5)
+    true = dh.with_deviations({n: rng.normal() * 5e-4 for n in dh.parameter_names if n[0] in "tad"})
+    q = cc.poses.uniform(dh, 60, seed=6)
+    meas = cc.simulate(true, q, noise=2e-5, seed=7)
+    q_new = cc.poses.uniform(dh, 300, seed=8)
+    errors = []
+    for nominal in (dh, urdf):
+        cal = cc.identify(nominal, meas, "all")
+        assert cal.success, cal.message
+        err = cal.robot.measured_points(q_new) - true.measured_points(q_new)
+        errors.append(np.sqrt(np.mean(np.sum(err**2, axis=-1))))
+    assert errors[1] == pytest.approx(errors[0], rel=0.05)
+
+
+def test_a_tree_without_a_tip_names_the_candidates(tmp_path):
+    text = """<robot name="y">
+      <link name="b"/><link name="l"/><link name="r"/>
+      <joint name="jl" type="continuous"><parent link="b"/><child link="l"/></joint>
+      <joint name="jr" type="continuous"><parent link="b"/><child link="r"/></joint>
+    </robot>"""
+    (tmp_path / "y.urdf").write_text(text)
+    with pytest.raises(cc.CalibrationError, match="tip_link= one of l, r"):
+        cc.load_robot(tmp_path / "y.urdf")
+    assert cc.load_robot(tmp_path / "y.urdf", tip_link="r").parameter_names[0] == "jr.x"
+
+
+def test_the_command_line_reads_and_writes_urdf(tmp_path, capsys):
+    assert main(["show", str(KR16)]) == 0
+    assert "joint_a4" in capsys.readouterr().out
+    robot = cc.load_robot(KR16).with_points([[0.05, 0.02, 0.03]])
+    _, meas = _session(robot, 60, seed=11)
+    cc.write_csv(tmp_path / "m.csv", meas, robot)
+    cc.save_robot(robot, tmp_path / "kr16.toml")
+    out = tmp_path / "calibrated.urdf"
+    argv = ["identify", str(tmp_path / "kr16.toml"), str(tmp_path / "m.csv"), "-o", str(out)]
+    assert main([*argv, "--parameters", "all"]) == 0
+    assert cc.load_robot(out).dof == 6
+
+
+def test_joint_offsets_fold_into_the_origins(tmp_path):
+    robot = cc.load_robot(KR16)
+    moved = robot.with_deviations({f"joint_a{i}.offset": 0.01 * i for i in range(1, 7)})
+    notes = cc.save_robot(moved, tmp_path / "offsets.urdf")
+    assert any("no joint offset" in n for n in notes)
+    q = cc.poses.uniform(robot, 30, seed=2)
+    assert np.abs(oracle(tmp_path / "offsets.urdf")(q, "tool0") - moved.fk(q)).max() < 1e-12
