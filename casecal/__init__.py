@@ -28,6 +28,7 @@ _PUBLIC = {
     "Robot": "model.robot",
     "Validation": "identification.validation",
     "calibrate_until": "design.campaign",
+    "compensate": "model.compensate",
     "identify": "identification.fit",
     "load_robot": "model.catalog",
     "observability": "identification.analysis",

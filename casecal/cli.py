@@ -693,6 +693,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_validate)
 
+    from .cli_compensate import add_command
+
+    add_command(command)
+
     p = command(
         "report",
         help="run every study and write the PDF report, figures and tables",

@@ -61,7 +61,16 @@ HOT_CALLS = 100
 compiled C: one kernel of every parameter column, its columns taken in numpy, so that the
 many column sets of repeated fits (a study's trials) share one compile per machine."""
 
-KINDS = ("fk", "position", "position_jacobian", "pose_jacobian", "points", "points_jacobian")
+KINDS = (
+    "fk",
+    "position",
+    "position_jacobian",
+    "pose_jacobian",
+    "points",
+    "points_jacobian",
+    "joint_jacobian",
+)
+PARAMETER_JACOBIANS = ("position_jacobian", "pose_jacobian", "points_jacobian")
 
 
 @dataclass(frozen=True)
@@ -287,6 +296,15 @@ class Chain:
             return T.T
         if kind == "position":
             return position
+        if kind == "joint_jacobian":
+            # ∂(position, orientation)/∂q, 6 × dof: the orientation rows are vee(∂R/∂q_i Rᵀ)
+            q, R = self.graph[0], T[:3, :3]
+            dR = ca.jacobian(ca.vec(R), q)
+            rows = []
+            for i in range(q.numel()):
+                W = ca.reshape(dR[:, i], 3, 3) @ R.T
+                rows.append(ca.vertcat(W[2, 1], W[0, 2], W[1, 0]))
+            return ca.vertcat(ca.jacobian(position, q), ca.horzcat(*rows)).T
         if kind in ("points", "points_jacobian"):
             points = self._points(T)
             return points if kind == "points" else self._jacobian(points, columns).T
@@ -334,7 +352,7 @@ class Chain:
         if q.shape[0] < COMPILE_MIN_POSES:
             hot = self._small_calls[kind] = self._small_calls.get(kind, 0) + 1
             if hot >= HOT_CALLS:
-                jacobian = kind.endswith("jacobian")
+                jacobian = kind in PARAMETER_JACOBIANS
                 every = tuple(range(len(self.names))) if jacobian else ()
                 out = self._evaluator(kind, every).compiled(q, self.extended(p))
                 if out is not None:
@@ -369,6 +387,7 @@ class Chain:
             "pose_jacobian": (6, k),
             "points": (m3,),
             "points_jacobian": (m3, k),
+            "joint_jacobian": (6, len(self.structure.joint_types)),
         }[kind]
 
 
