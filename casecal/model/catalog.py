@@ -83,7 +83,8 @@ def load_robot(
     ----------
     name_or_path : str or path
         A catalog name (see `robots`), the path of a robot file (schema in the module doc),
-        or of a ``.urdf`` (or ``.xacro``, with the xacro extra) file.
+        of a ``.urdf`` (or ``.xacro``, with the xacro extra) file, or of a UR
+        ``kinematics:`` file (``.yaml``, `casecal.model.ur_kinematics`).
     base_link, tip_link : str, optional
         URDF only: the chain's ends (defaults in `casecal.model.urdf.read_urdf`).
 
@@ -103,6 +104,10 @@ def load_robot(
         from .urdf import load_urdf
 
         return load_urdf(path, base_link, tip_link)
+    if path.suffix in (".yaml", ".yml"):
+        from .ur_kinematics import read_ur_kinematics
+
+        return read_ur_kinematics(read_text(path, "UR kinematics file"), str(path), path.stem)
     if base_link is not None or tip_link is not None:
         raise CalibrationError("base_link= and tip_link= apply to URDF files only")
     if path.suffix == ".toml" or path.exists() or "/" in text or "\\" in text:

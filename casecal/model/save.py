@@ -19,14 +19,17 @@ def robot_text(robot, path) -> tuple[str, list[str]]:
 
         return robot_to_urdf(robot)
     if suffix in (".yaml", ".yml"):
-        raise CalibrationError(
-            f"{path}: the UR kinematics file is not written yet; save as .urdf or .toml"
-        )
-    raise CalibrationError(f"{path}: unknown robot file type {suffix!r}; use .toml or .urdf")
+        from .ur_kinematics import ur_kinematics_text
+
+        return ur_kinematics_text(robot)
+    raise CalibrationError(
+        f"{path}: unknown robot file type {suffix!r}; use .toml, .urdf or .yaml (UR kinematics)"
+    )
 
 
 def save_robot(robot, path) -> list[str]:
-    """Write `robot` to `path` (atomically) as TOML (``.toml``) or URDF (``.urdf``).
+    """Write `robot` to `path` (atomically) as TOML (``.toml``), URDF (``.urdf``) or a UR
+    kinematics file (``.yaml``, `casecal.model.ur_kinematics`).
 
     A robot read from a URDF is written into its own file's text with only the calibrated
     numbers changed; a DH robot as a new URDF of its chain (`casecal.model.urdf_out`).

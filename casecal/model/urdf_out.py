@@ -50,6 +50,37 @@ def _set_origin(text: str, joint: str, xyz, rpy) -> str:
     return text[: start.end()] + body + text[end:]
 
 
+def file_origins(robot) -> tuple[dict[str, np.ndarray], list]:
+    """Each movable joint's origin in its URDF file's own frames (4 × 4, with its offset
+    folded in), and the fixed joints after the last movable one (`robot` from a URDF)."""
+    source = robot.urdf
+    _, joints = parse(source.text, "URDF")
+    path, _, _ = chain_path(joints, source.base_link, source.tip_link, "URDF")
+    movable = {j.name: j for j in robot.joints}
+    origins, pending, fixed_after = {}, np.eye(4), []
+    for j in path:
+        if j.name not in movable:
+            pending = pending @ j.T
+            fixed_after.append(j)
+            continue
+        cj = movable[j.name]
+        T = transform(cj.xyz, cj.rpy) @ _rotation_about(cj.axis, cj.offset)
+        origins[j.name] = np.linalg.inv(pending) @ T
+        pending, fixed_after = np.eye(4), []
+    return origins, fixed_after
+
+
+def offset_note(robot, where: str) -> list[str]:
+    """The note for calibrated joint offsets folded into origins, if there are any."""
+    offsets = [j.name for j in robot.joints if getattr(j, "offset", 0.0)]
+    if not offsets:
+        return []
+    return [
+        f"{where} has no joint offset: the calibrated offsets of {', '.join(offsets)} are "
+        "folded into their joints' origins (exact)"
+    ]
+
+
 def calibrated_urdf(robot) -> tuple[str, list[str]]:
     """The URDF text of `robot` (read from a URDF) with its calibrated numbers, and notes.
 
@@ -59,29 +90,11 @@ def calibrated_urdf(robot) -> tuple[str, list[str]]:
     notes : list of str
         What the file cannot hold and where it went instead (one sentence each).
     """
-    source = robot.urdf
-    _, joints = parse(source.text, "URDF")
-    path, _, _ = chain_path(joints, source.base_link, source.tip_link, "URDF")
-    text, notes, pending, fixed_after = source.text, [], np.eye(4), []
-    movable = {j.name: j for j in robot.joints}
-    offsets = []
-    for j in path:
-        if j.name not in movable:
-            pending = pending @ j.T
-            fixed_after.append(j)
-            continue
-        cj = movable[j.name]
-        T = transform(cj.xyz, cj.rpy) @ _rotation_about(cj.axis, cj.offset)
-        xyz, rpy = split(np.linalg.inv(pending) @ T)
-        text = _set_origin(text, j.name, xyz, rpy)
-        if cj.offset:
-            offsets.append(j.name)
-        pending, fixed_after = np.eye(4), []
-    if offsets:
-        notes.append(
-            "a URDF has no joint offset: the calibrated offsets of "
-            f"{', '.join(offsets)} are folded into their joints' origins (exact)"
-        )
+    origins, fixed_after = file_origins(robot)
+    text = robot.urdf.text
+    for name, T in origins.items():
+        text = _set_origin(text, name, *split(T))
+    notes = offset_note(robot, "a URDF")
     tool = transform(robot.tool.xyz, robot.tool.rpy)
     if fixed_after:
         before = np.eye(4)

@@ -1,0 +1,177 @@
+"""The ``kinematics:`` file of Universal Robots' ROS description packages.
+
+ur_description builds its six joints from this file: each joint's origin (x, y, z, roll,
+pitch, yaw, m and rad) relative to the previous link, the first relative to
+``base_link_inertia`` (which is UR's DH base frame), every joint turning about its z axis;
+``tool0`` is the ``wrist_3_link`` frame. A UR's factory calibration, or casecal's, goes to
+the robot's ROS stack through this file (``kinematics_params_file``).
+
+Writing: a URDF robot from a UR URDF (its joint origins in the file's frames) or a
+standard-DH robot of six revolute joints (``origin_i = Tx(a_{i-1}) Rx(alpha_{i-1}) Ry(beta)
+· Tz(d_i) Rz(theta_i)``, the DH frames being UR's link frames). Reading: a URDF-convention
+robot of those six joints, which reproduces the chain the file describes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import CalibrationError
+from .urdf import UrdfJoint, split, transform
+
+JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+KEYS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
+FIELDS = ("x", "y", "z", "roll", "pitch", "yaw")
+LIMITS = (
+    ((-2 * math.pi, 2 * math.pi),) * 2 + ((-math.pi, math.pi),) + ((-2 * math.pi, 2 * math.pi),) * 3
+)
+"""UR e-series joint ranges (rad): ±360°, the elbow ±180°."""
+
+
+def _is_identity(T: np.ndarray) -> bool:
+    return bool(np.allclose(T, np.eye(4), rtol=0, atol=1e-15))
+
+
+def _dh_origins(robot) -> tuple[list[np.ndarray], list[str]]:
+    if robot.convention != "dh" or robot.joint_types != "RRRRRR":
+        raise CalibrationError(
+            f"robot {robot.name!r}: a UR kinematics file holds six revolute joints in standard "
+            "DH or from a UR URDF"
+        )
+    origins, post = [], np.eye(4)
+    for j in robot.joints:
+        pre = transform((0, 0, j.d), (0, 0, j.theta))
+        origins.append(post @ pre)
+        post = (
+            transform((j.a, 0, 0), (0, 0, 0))
+            @ transform((0, 0, 0), (j.alpha, 0, 0))
+            @ transform((0, 0, 0), (0, j.beta or 0.0, 0))
+        )
+    notes = []
+    if not _is_identity(post @ transform(robot.tool.xyz, robot.tool.rpy)):
+        notes.append("the tool frame (beyond a6, alpha6) is not written: tool0 is wrist_3_link")
+    return origins, notes
+
+
+def _urdf_origins(robot) -> tuple[list[np.ndarray], list[str]]:
+    from .urdf_out import _rotation_about, file_origins, offset_note
+
+    names = [j.name for j in robot.joints]
+    prefix = names[0][: -len(JOINTS[0])] if names[0].endswith(JOINTS[0]) else None
+    if prefix is None or names != [prefix + n for n in JOINTS]:
+        raise CalibrationError(
+            f"robot {robot.name!r}: a UR kinematics file needs the joints {', '.join(JOINTS)}"
+            f" (with one common prefix); this robot has {', '.join(names)}"
+        )
+    if robot.urdf is not None:
+        found, _ = file_origins(robot)
+        origins = [found[n] for n in names]
+    else:
+        origins = [
+            transform(j.xyz, j.rpy) @ _rotation_about(j.axis, j.offset) for j in robot.joints
+        ]
+    notes = offset_note(robot, "a UR kinematics file")
+    if not _is_identity(transform(robot.tool.xyz, robot.tool.rpy)) and robot.urdf is None:
+        notes.append("the tool frame is not written: tool0 is wrist_3_link")
+    return origins, notes
+
+
+def ur_kinematics_text(robot) -> tuple[str, list[str]]:
+    """The ``kinematics:`` YAML of `robot`, and notes on what it cannot hold."""
+    origins, notes = (_urdf_origins if robot.convention == "urdf" else _dh_origins)(robot)
+    if robot.convention == "urdf" and any(
+        not np.allclose(j.axis, (0, 0, 1), rtol=0, atol=1e-12) for j in robot.joints
+    ):
+        raise CalibrationError(
+            f"robot {robot.name!r}: a UR kinematics file needs joints about their z axes"
+        )
+    if not _is_identity(transform(robot.base.xyz, robot.base.rpy)):
+        notes.append(
+            "the base frame (instrument to the base) is not part of the robot and is not "
+            "written; it is in the TOML output"
+        )
+    lines = ["kinematics:"]
+    for key, T in zip(KEYS, origins, strict=True):
+        xyz, rpy = split(T)
+        lines.append(f"  {key}:")
+        lines += [f"    {f}: {v!r}" for f, v in zip(FIELDS, (*xyz, *rpy), strict=True)]
+    lines.append(f"  hash: casecal_{abs(hash(tuple(np.round(np.ravel(origins), 15)))):x}")
+    return "\n".join(lines) + "\n", notes
+
+
+def _parse(text: str, label: str) -> dict[str, dict[str, float]]:
+    """The six origins of a ``kinematics:`` file (the subset of YAML it uses)."""
+    groups: dict[str, dict[str, float]] = {}
+    current = None
+    seen_top = False
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].rstrip()
+        if not line.strip():
+            continue
+        indent = len(line) - len(line.lstrip())
+        key, _, value = line.strip().partition(":")
+        value = value.strip()
+        if indent == 0:
+            if key != "kinematics" or value:
+                raise CalibrationError(f"{label}: line {number}: expected 'kinematics:'")
+            seen_top = True
+        elif not seen_top:
+            raise CalibrationError(f"{label}: line {number}: expected 'kinematics:' first")
+        elif key == "hash":
+            continue
+        elif not value:
+            if key not in KEYS:
+                raise CalibrationError(
+                    f"{label}: line {number}: {key!r} is not one of {', '.join(KEYS)}"
+                )
+            current = groups.setdefault(key, {})
+        elif current is None or key not in FIELDS:
+            raise CalibrationError(f"{label}: line {number}: unexpected {key!r}")
+        else:
+            try:
+                current[key] = float(value)
+            except ValueError:
+                raise CalibrationError(
+                    f"{label}: line {number}: {value!r} is not a number"
+                ) from None
+    for key in KEYS:
+        missing = [f for f in FIELDS if f not in groups.get(key, {})]
+        if missing:
+            raise CalibrationError(f"{label}: {key} misses {', '.join(missing)}")
+    return groups
+
+
+def read_ur_kinematics(text: str, label: str = "kinematics file", name: str = "ur"):
+    """The URDF-convention `Robot` of the six joints a ``kinematics:`` file describes."""
+    from .robot import Robot
+
+    groups = _parse(text, label)
+    joints = []
+    for joint, key, limits in zip(JOINTS, KEYS, LIMITS, strict=True):
+        g = groups[key]
+        joints.append(
+            UrdfJoint(
+                name=joint,
+                type="R",
+                axis=(0.0, 0.0, 1.0),
+                xyz=(g["x"], g["y"], g["z"]),
+                rpy=(g["roll"], g["pitch"], g["yaw"]),
+                limits=limits,
+            )
+        )
+    return Robot(
+        name=name,
+        joints=tuple(joints),
+        convention="urdf",
+        full_name=f"{name} (UR kinematics file: base_link_inertia to tool0)",
+        source=(label,),
+    )
