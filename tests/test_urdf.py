@@ -166,3 +166,30 @@ def test_joint_offsets_fold_into_the_origins(tmp_path):
     assert any("no joint offset" in n for n in notes)
     q = cc.poses.uniform(robot, 30, seed=2)
     assert np.abs(oracle(tmp_path / "offsets.urdf")(q, "tool0") - moved.fk(q)).max() < 1e-12
+
+
+def test_a_xacro_file_expands_to_the_same_robot(tmp_path):
+    pytest.importorskip("xacro")
+    joint = """
+      <xacro:macro name="arm_joint" params="n parent child z">
+        <joint name="${n}" type="revolute">
+          <parent link="${parent}"/><child link="${child}"/>
+          <origin xyz="0.1 0 ${z}" rpy="0 ${pi/2} 0"/><axis xyz="0 0 1"/>
+          <limit lower="-3" upper="3" effort="1" velocity="1"/>
+        </joint>
+      </xacro:macro>"""
+    text = f"""<robot name="two" xmlns:xacro="http://www.ros.org/wiki/xacro">{joint}
+      <link name="a"/><link name="b"/><link name="c"/>
+      <xacro:arm_joint n="j1" parent="a" child="b" z="0.3"/>
+      <xacro:arm_joint n="j2" parent="b" child="c" z="${{0.3 * 2}}"/>
+    </robot>"""
+    (tmp_path / "two.urdf.xacro").write_text(text)
+    robot = cc.load_robot(tmp_path / "two.urdf.xacro")
+    assert robot.parameter_names[:2] == ("j1.x", "j1.y")
+    assert robot.joints[1].xyz == (0.1, 0.0, 0.6) and robot.joints[1].rpy[1] == np.pi / 2
+    (tmp_path / "find.xacro").write_text(
+        '<robot name="f" xmlns:xacro="http://www.ros.org/wiki/xacro">'
+        '<xacro:include filename="$(find nowhere)/x.xacro"/></robot>'
+    )
+    with pytest.raises(cc.CalibrationError, match=r"xacro FILE > robot\.urdf"):
+        cc.load_robot(tmp_path / "find.xacro")

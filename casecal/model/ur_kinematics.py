@@ -97,7 +97,7 @@ def ur_kinematics_text(robot) -> tuple[str, list[str]]:
     if not _is_identity(transform(robot.base.xyz, robot.base.rpy)):
         notes.append(
             "the base frame (instrument to the base) is not part of the robot and is not "
-            "written; it is in the TOML output"
+            "written; save the robot as .toml to keep it"
         )
     lines = ["kinematics:"]
     for key, T in zip(KEYS, origins, strict=True):

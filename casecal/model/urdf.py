@@ -279,7 +279,12 @@ def load_urdf(path: Path, base_link: str | None = None, tip_link: str | None = N
         try:
             text = xacro.process_file(str(path)).toxml()
         except Exception as exc:  # xacro raises its own and many builtin types
-            raise CalibrationError(f"{path}: xacro could not expand it ({exc})") from None
+            detail = " ".join(str(exc).split())
+            raise CalibrationError(
+                f"{path}: xacro could not expand it ({detail}); a file that finds ROS "
+                "packages ($(find ...)) expands in its workspace: run 'xacro FILE > "
+                "robot.urdf' there and load the .urdf"
+            ) from None
     else:
         text = read_text(path, "URDF file")
     return read_urdf(text, str(path), base_link, tip_link)

@@ -107,7 +107,7 @@ def calibrated_urdf(robot) -> tuple[str, list[str]]:
     if not np.allclose(transform(robot.base.xyz, robot.base.rpy), np.eye(4), rtol=0, atol=1e-15):
         notes.append(
             "the base frame (instrument to the base link) is not part of the robot and is "
-            "not written; it is in the TOML output"
+            "not written; save the robot as .toml to keep it"
         )
     if robot.points:
         notes.append(
