@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import CalibrationError
-from ..model.parameters import select, unit
+from ..model.parameters import UNITS, select, unit
 from ..model.robot import Robot, check_joint_values
 
 RANK_TOLERANCE = 1e-8
@@ -427,7 +427,7 @@ class Representation:
         )
 
 
-PLAUSIBLE = {"m": 0.01, "rad": 0.01}
+PLAUSIBLE = {u: facts.generous for u, facts in UNITS.items()}
 """A generous deviation (10 mm, 0.57°) by which to judge whether a term matters."""
 
 REPRESENTED = 0.05

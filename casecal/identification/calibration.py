@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ..model.parameters import is_length, unit
+from ..model.parameters import UNITS, unit
 from ..model.robot import Robot
 from .analysis import Observability, Representation
 from .audit import Audit
@@ -28,14 +28,16 @@ STATUS_MESSAGES = {
 }
 
 
-POORLY_DETERMINED = {"m": 1e-3, "rad": math.radians(0.1)}
+POORLY_DETERMINED = {u: facts.poorly for u, facts in UNITS.items()}
 """Standard errors above these (1 mm, 0.1°) mark an estimate the data barely constrain:
 no industrial arm is calibrated usefully with a parameter that uncertain."""
 
 
 def display_unit(name: str) -> tuple[str, float]:
-    """Unit and factor from SI for tables: ("mm", 1e3) for lengths, ("deg", 180/π) for angles."""
-    return ("mm", 1e3) if is_length(name) else ("deg", 180.0 / math.pi)
+    """Unit and factor from SI for tables: ("mm", 1e3) for lengths, ("deg", 180/π) for
+    angles (`casecal.model.parameters.UNITS`)."""
+    facts = UNITS[unit(name)]
+    return facts.shown, facts.factor
 
 
 def _rms(residuals: np.ndarray) -> float:

@@ -37,13 +37,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.parameters import unit
+from ..model.parameters import UNITS, unit
 from .linalg import column_scales, gauss_newton_step, nr_threshold
 
 NEGLIGIBLE_SE = 1e-9
 """Standard errors (m or rad) below this are rounding: never a reason to hold a parameter."""
 
-PLAUSIBLE_DEVIATION = {"m": 2.5e-3, "rad": np.radians(0.5)}
+PLAUSIBLE_DEVIATION = {u: facts.plausible for u, facts in UNITS.items()}
 """Deviations of a joint or tool parameter larger than this are not expected of a real arm
 (a nominal wrong by more, a length off by 100 mm, is found by a well-determined estimate,
 not ruled out by this). Holding a parameter rather than estimating it is the better bet
@@ -281,7 +281,8 @@ class _Judge:
 
 
 def _reason(name: str, se: float, spread: float, e0: float, too_wide: bool) -> str:
-    scale, u = (1e3, "mm") if unit(name) == "m" else (180 / np.pi, "°")
+    facts = UNITS[unit(name)]
+    scale, u = facts.factor, "°" if facts.shown == "deg" else facts.shown
     text = f"its standard error would be {se * scale:.3g} {u}"
     if too_wide:
         return (

@@ -29,6 +29,7 @@ Every mistake raises `CalibrationError` naming the file, the key and the fix.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -36,10 +37,11 @@ from pathlib import Path
 from ..errors import CalibrationError
 from ..textio import read_text
 from .robot import Frame, Joint, Robot
+from .terms_toml import TOP_KEYS, add_terms, inertial_lines, split_rows, terms_lines
 
 _LENGTH = {"m": 1.0, "mm": 1e-3}
 _ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
-_TOP_KEYS = {
+_TOP_KEYS = TOP_KEYS | {
     "points",
     "calibrated_from",
     "name",
@@ -147,6 +149,7 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
         raise CalibrationError(
             f"{label}: missing or empty [[joints]]; add one [[joints]] table per joint"
         )
+    rows, inertials = split_rows(rows, length, label, _number)
     joints = []
     for i, row in enumerate(rows, start=1):
         where = f"joints[{i}]"
@@ -206,8 +209,9 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     calibrated_from = data.get("calibrated_from", "")
     if not isinstance(calibrated_from, str):
         raise CalibrationError(f"{label}: calibrated_from must be a robot name or path string")
-    return Robot(
+    robot = Robot(
         name=name,
+        inertials=inertials,
         calibrated_from=calibrated_from,
         points=points,
         joints=tuple(joints),
@@ -218,6 +222,7 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
         source=source,
         confidence=str(data.get("confidence", "")),
     )
+    return add_terms(robot, data, angle, label, _number)
 
 
 def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:
@@ -243,7 +248,7 @@ def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:
     dict of str to float
         Deviations in m and rad.
     """
-    from .parameters import is_length
+    from .parameters import unit
 
     label = str(path)
     try:
@@ -263,8 +268,17 @@ def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:
                 f"{label}: {name!r} is not a parameter of robot {robot.name!r}; "
                 f"its parameters are: {', '.join(robot.parameter_names)}"
             )
-        out[name] = _number(value, label, name) * (length if is_length(name) else angle)
+        # compliance terms (rad/(N·m), rad/m) are SI whatever the file's units
+        scale = {"m": length, "rad": angle}.get(unit(name), 1.0)
+        if unit(name) == "rad" and _is_lumped_moment(name):
+            scale = 1.0
+        out[name] = _number(value, label, name) * scale
     return out
+
+
+def _is_lumped_moment(name: str) -> bool:
+    """A lumped gravity moment ``g{i}_{k}x`` is in rad but no angle: it stays SI."""
+    return re.match(r"^g\d+_\d+[xyz]$", name) is not None
 
 
 def robot_to_toml(robot: Robot) -> str:
@@ -279,11 +293,11 @@ def robot_to_toml(robot: Robot) -> str:
         lines.append(f"confidence = {_q(robot.confidence)}")
     if robot.calibrated_from:
         lines.append(f"calibrated_from = {_q(robot.calibrated_from)}")
-    for j in robot.joints:
+    for i, j in enumerate(robot.joints):
         if robot.convention == "urdf":
             from .urdf import joint_to_lines
 
-            lines += ["", "[[joints]]", *joint_to_lines(j, _q)]
+            lines += ["", "[[joints]]", *joint_to_lines(j, _q), *inertial_lines(robot, i)]
             continue
         lines += [
             "",
@@ -298,6 +312,7 @@ def robot_to_toml(robot: Robot) -> str:
             lines.append(f"beta = {j.beta!r}")
         if j.limits is not None:
             lines.append(f"limits = [{j.limits[0]!r}, {j.limits[1]!r}]")
+        lines += inertial_lines(robot, i)
     if robot.points:
         rows = ", ".join("[" + ", ".join(repr(float(v)) for v in p) + "]" for p in robot.points)
         lines.insert(lines.index('angle_unit = "rad"') + 1, f"points = [{rows}]")
@@ -308,7 +323,12 @@ def robot_to_toml(robot: Robot) -> str:
             f"xyz = [{', '.join(repr(float(v)) for v in frame.xyz)}]",
             f"rpy = [{', '.join(repr(float(v)) for v in frame.rpy)}]",
         ]
-    return "\n".join(lines) + "\n"
+    extra = terms_lines(robot)
+    if extra and not extra[0].startswith("gravity"):
+        return "\n".join(lines + extra) + "\n"
+    if extra:  # gravity is a top-level key: before the first table
+        lines.insert(lines.index('angle_unit = "rad"') + 1, extra.pop(0))
+    return "\n".join(lines + extra) + "\n"
 
 
 def _q(text: str) -> str:

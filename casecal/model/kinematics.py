@@ -46,6 +46,7 @@ import casadi as ca
 import numpy as np
 
 from . import _native
+from .chainwalk import walk
 from .parameters import parameter_names, urdf_parameter_names
 
 log = logging.getLogger(__name__)
@@ -88,6 +89,10 @@ class Structure:
         Measured points on the tool (0: the tool frame's origin).
     joint_names, axes : tuple
         URDF only: each movable joint's name and unit axis (in its own frame).
+    terms : tuple of ErrorTerm
+        Error terms on the joint angles, their values zeroed (`casecal.model.terms`).
+    gravity : (float, float, float)
+        Gravity's direction in the base frame (for gravity terms).
     """
 
     convention: str
@@ -96,13 +101,19 @@ class Structure:
     n_points: int = 0
     joint_names: tuple[str, ...] = ()
     axes: tuple[tuple[float, float, float], ...] = ()
+    terms: tuple = ()
+    gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
 
     @property
     def names(self) -> tuple[str, ...]:
-        """Names of the full parameter vector (see `casecal.model.parameters`)."""
+        """Names of the full parameter vector (see `casecal.model.parameters`), then the
+        parameters of the error terms (`casecal.model.terms`)."""
+        extra = tuple(n for t in self.terms for n in t.parameters)
         if self.convention == "urdf":
-            return urdf_parameter_names(self.joint_names, self.joint_types, self.n_points)
-        return parameter_names(len(self.joint_types), self.beta_joints, self.n_points)
+            names = urdf_parameter_names(self.joint_names, self.joint_types, self.n_points)
+        else:
+            names = parameter_names(len(self.joint_types), self.beta_joints, self.n_points)
+        return names + extra
 
 
 def needs_beta(convention: str, index: int, n_joints: int, alpha: float) -> bool:
@@ -221,18 +232,17 @@ class Chain:
             xyz = [P[f"{prefix}_{a}"] for a in "xyz"]
             return frame_transform(xyz, [trig[f"{prefix}_r{a}"] for a in "xyz"])
 
-        T = frame("base")
-        if structure.convention == "urdf":
-            for i, (jt, name, axis) in enumerate(
-                zip(structure.joint_types, structure.joint_names, structure.axes, strict=True)
-            ):
-                xyz = [P[f"{name}.{c}"] for c in "xyz"]
-                origin = frame_transform(
-                    xyz, [trig[f"{name}.{c}"] for c in ("roll", "pitch", "yaw")]
-                )
-                angle = q[i] + P[f"{name}.offset"] if jt == "R" else q[i]
-                T = T @ origin @ joint_motion(jt, axis, angle)
-            return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
+        base = frame("base")
+        q_eff = [q[i] for i in range(q.numel())]
+        if structure.terms:
+            from .terms import STANDARD_GRAVITY, joint_deltas
+
+            rigid = walk(structure, base, q_eff, P, trig)
+            gravity = base[:3, :3] @ ca.DM(structure.gravity) * STANDARD_GRAVITY
+            deltas = joint_deltas(structure.terms, rigid, q, P.__getitem__, gravity)
+            q_eff = [qi + d for qi, d in zip(q_eff, deltas, strict=True)]
+        T = walk(structure, base, q_eff, P, trig).T
+        return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
         for i, jt in enumerate(structure.joint_types, start=1):
             T = T @ link_transform(
                 structure.convention,

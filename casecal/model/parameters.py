@@ -21,8 +21,10 @@ Lengths are in metres and angles in radians everywhere inside casecal.
 from __future__ import annotations
 
 import fnmatch
+import math
 import re
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 
 from ..errors import CalibrationError
 
@@ -86,8 +88,47 @@ def urdf_parameter_names(
     return (*names, *frame_names("base"), *frame_names("tool"), *points)
 
 
+@dataclass(frozen=True)
+class Unit:
+    """What casecal knows of a parameter unit.
+
+    Attributes
+    ----------
+    shown, factor : str, float
+        The unit of tables and the factor from SI to it (mm and 1e3 for metres).
+    plausible : float
+        The largest deviation expected of a real arm, SI: holding a parameter beats
+        estimating it when its standard error exceeds its deviation, past this any.
+    poorly : float
+        A standard error above this marks an estimate the data barely constrain.
+    generous : float
+        A generous deviation by which to judge whether a term matters.
+    """
+
+    shown: str
+    factor: float
+    plausible: float
+    poorly: float
+    generous: float
+
+
+UNITS = {
+    "m": Unit("mm", 1e3, 2.5e-3, 1e-3, 0.01),
+    "rad": Unit("deg", 180.0 / math.pi, math.radians(0.5), math.radians(0.1), 0.01),
+    # joint compliance: an industrial arm's joints give 1e-7 to 1e-5 rad per N·m
+    "rad/(N·m)": Unit("µrad/(N·m)", 1e6, 2e-5, 5e-7, 2e-5),
+    # a lumped gravity term: compliance times a weight (1e-6 rad/(N·m) · 1e3 N)
+    "rad/m": Unit("mrad/m", 1e3, 1e-2, 1e-3, 1e-2),
+}
+_COMPLIANCE_RE = re.compile(r"^c\d+$")
+_LUMPED_RE = re.compile(r"^g\d+_\d+([mxyz])$")
+
+
 def is_length(name: str) -> bool:
-    """True for parameters measured in metres, False for those in radians."""
+    """True for parameters measured in metres, False for those in radians (and the
+    compliance terms' own units, `unit`)."""
+    if _COMPLIANCE_RE.match(name) or _LUMPED_RE.match(name):
+        return False
     if "." in name:  # a URDF joint's origin: {joint}.x … {joint}.offset
         return name.rsplit(".", 1)[1] in ("x", "y", "z")
     match = _JOINT_RE.match(name)
@@ -97,7 +138,13 @@ def is_length(name: str) -> bool:
 
 
 def unit(name: str) -> str:
-    """SI unit of a parameter: ``"m"`` or ``"rad"``."""
+    """SI unit of a parameter: ``"m"``, ``"rad"`` or, for a joint compliance ``c{i}``,
+    ``"rad/(N·m)"`` (see `UNITS`)."""
+    if _COMPLIANCE_RE.match(name):
+        return "rad/(N·m)"
+    lumped = _LUMPED_RE.match(name)
+    if lumped:
+        return "rad/m" if lumped.group(1) == "m" else "rad"
     return "m" if is_length(name) else "rad"
 
 

@@ -86,6 +86,14 @@ class Robot:
     urdf : casecal.model.urdf.UrdfSource or None
         For a robot read from a URDF: the text and the chain's ends, so that saving it
         as URDF changes only the calibrated numbers.
+    terms : tuple of casecal.model.terms.ErrorTerm
+        Error terms beyond rigid geometry on the joint angles (`with_compliance`,
+        `with_joint_harmonics`, `with_terms`); their parameters follow the frames'.
+    inertials : tuple
+        Per joint, the body it moves: (mass kg, centre of mass (x, y, z) m in that body's
+        frame), or None; empty when unknown. Gravity terms need them.
+    gravity : (float, float, float)
+        Gravity's direction in the base frame; (0, 0, -1) for a floor mount.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -102,9 +110,15 @@ class Robot:
     points: tuple[tuple[float, float, float], ...] = ()
     calibrated_from: str = ""
     urdf: object = None
+    terms: tuple = ()
+    inertials: tuple = ()
+    gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
+        from .terms import check_terms
+
+        check_terms(self)
         if self.convention not in ("dh", "mdh", "urdf"):
             raise CalibrationError(
                 f"robot {self.name!r}: convention {self.convention!r} is unknown; "
@@ -157,6 +171,8 @@ class Robot:
     @property
     def structure(self) -> kinematics.Structure:
         """What the CasADi graph depends on (everything but the numbers)."""
+        shapes = tuple(dataclasses.replace(t, values=()) for t in self.terms)
+        extra = {"terms": shapes, "gravity": tuple(self.gravity)} if self.terms else {}
         if self.convention == "urdf":
             return kinematics.Structure(
                 "urdf",
@@ -164,9 +180,12 @@ class Robot:
                 n_points=len(self.points),
                 joint_names=tuple(j.name for j in self.joints),
                 axes=tuple(j.axis for j in self.joints),
+                **extra,
             )
         betas = tuple(i for i, j in enumerate(self.joints, start=1) if j.beta is not None)
-        return kinematics.Structure(self.convention, self.joint_types, betas, len(self.points))
+        return kinematics.Structure(
+            self.convention, self.joint_types, betas, len(self.points), **extra
+        )
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -190,6 +209,7 @@ class Robot:
                 values.append(j.beta)
         values += [*self.base.xyz, *self.base.rpy, *self.tool.xyz, *self.tool.rpy]
         values += [v for p in self.points for v in p]
+        values += [v for t in self.terms for v in t.values]
         return np.array(values, dtype=float)
 
     @property
@@ -283,12 +303,16 @@ class Robot:
         points = tuple(
             tuple(p[f"point{k}_{a}"] for a in "xyz") for k in range(1, len(self.points) + 1)
         )
+        terms = tuple(
+            dataclasses.replace(t, values=tuple(p[n] for n in t.parameters)) for t in self.terms
+        )
         return dataclasses.replace(
             self,
             joints=tuple(joints),
             base=frame("base"),
             tool=frame("tool"),
             points=points,
+            terms=terms,
             auto_beta=False,
         )
 
@@ -301,6 +325,23 @@ class Robot:
         return dataclasses.replace(
             self, points=tuple(map(tuple, np.asarray(points, float))), auto_beta=False
         )
+
+    def with_terms(self, *terms) -> Robot:
+        """A new Robot with the error terms `terms` (`casecal.model.terms.ErrorTerm`) added."""
+        return dataclasses.replace(self, terms=(*self.terms, *terms), auto_beta=False)
+
+    def with_compliance(self, joints=None) -> Robot:
+        """A new Robot whose revolute joints `joints` (1-based; None: every joint that
+        carries gravity load) deflect by ``c{i}·τ_i`` under gravity (`inertials` needed)."""
+        from .terms import compliance_terms
+
+        return self.with_terms(*compliance_terms(self, joints))
+
+    def with_joint_harmonics(self, joint: int, order: int) -> Robot:
+        """A new Robot with ``h{joint}_s{k}``, ``h{joint}_c{k}`` (k ≤ `order`) on a joint."""
+        from .terms import harmonics
+
+        return self.with_terms(harmonics(joint, order))
 
     def with_deviations(self, deviations: Mapping[str, float]) -> Robot:
         """A new Robot with `deviations` (SI: m, rad) added to the named parameters.

@@ -14,14 +14,20 @@ def robot_text(robot, path) -> tuple[str, list[str]]:
         from .catalog import robot_to_toml
 
         return robot_to_toml(robot), []
-    if suffix == ".urdf":
-        from .urdf_out import robot_to_urdf
-
-        return robot_to_urdf(robot)
-    if suffix in (".yaml", ".yml"):
-        from .ur_kinematics import ur_kinematics_text
-
-        return ur_kinematics_text(robot)
+    if suffix in (".urdf", ".yaml", ".yml"):
+        if suffix == ".urdf":
+            from .urdf_out import robot_to_urdf as writer
+        else:
+            from .ur_kinematics import ur_kinematics_text as writer
+        text, notes = writer(robot)
+        if robot.terms:
+            names = ", ".join(sorted({t.kind.replace("_", " ") for t in robot.terms}))
+            notes.append(
+                f"the error terms beyond geometry ({names}) cannot go into this file and are "
+                "not written: the controller will not apply them; save as .toml to keep them, "
+                "and use casecal compensate, which applies the full model"
+            )
+        return text, notes
     raise CalibrationError(
         f"{path}: unknown robot file type {suffix!r}; use .toml, .urdf or .yaml (UR kinematics)"
     )

@@ -1,0 +1,72 @@
+"""The symbolic walk down a serial chain, base to flange, for every convention.
+
+Besides the flange pose it returns what error terms built on the rigid chain need (joint
+gravity torques): each joint's axis and a point on it, and the frame of the body each
+joint moves, all in the world frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+
+
+@dataclass(frozen=True)
+class Walk:
+    """A chain walked once: the flange pose and, per joint, its axis and the body it moves.
+
+    Attributes
+    ----------
+    T : SX, 4 × 4
+        World pose of the last link's frame (before the tool frame).
+    axes, points : list of SX, 3 each
+        Joint i's unit axis and a point on it, world frame.
+    bodies : list of SX, 4 × 4
+        World pose of the frame of the body joint i moves (DH frame i, URDF child link).
+    """
+
+    T: ca.SX
+    axes: list
+    points: list
+    bodies: list
+
+
+def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict) -> Walk:
+    """Walk `structure` from `base` with effective joint variables `q_eff` (list of SX)."""
+    from .kinematics import frame_transform, joint_motion, link_transform
+
+    T, axes, points, bodies = base, [], [], []
+    if structure.convention == "urdf":
+        for jt, name, axis, q in zip(
+            structure.joint_types, structure.joint_names, structure.axes, q_eff, strict=True
+        ):
+            xyz = [P[f"{name}.{c}"] for c in "xyz"]
+            origin = T @ frame_transform(
+                xyz, [trig[f"{name}.{c}"] for c in ("roll", "pitch", "yaw")]
+            )
+            axes.append(origin[:3, :3] @ ca.DM(axis))
+            points.append(origin[:3, 3])
+            angle = q + P[f"{name}.offset"] if jt == "R" else q
+            T = origin @ joint_motion(jt, axis, angle)
+            bodies.append(T)
+        return Walk(T, axes, points, bodies)
+    for i, (jt, q) in enumerate(zip(structure.joint_types, q_eff, strict=True), start=1):
+        link = link_transform(
+            structure.convention,
+            jt,
+            q,
+            P[f"theta{i}"],
+            P[f"d{i}"],
+            P[f"a{i}"],
+            trig[f"alpha{i}"],
+            trig.get(f"beta{i}"),
+        )
+        after = T @ link
+        # standard DH turns link i about z of frame i-1; modified DH about z of frame i
+        on = T if structure.convention == "dh" else after
+        axes.append(on[:3, 2])
+        points.append(on[:3, 3])
+        T = after
+        bodies.append(T)
+    return Walk(T, axes, points, bodies)

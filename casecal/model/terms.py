@@ -1,0 +1,229 @@
+"""Error terms beyond rigid geometry, added to a joint's angle: ``θ_i + q_i + Δ_i(q, p)``.
+
+A term is a Python function that returns a CasADi expression of the joint values and of
+new named parameters; everything downstream (exact Jacobians, identifiability, standard
+errors, the summary, compiled kernels, TOML) treats its parameters like the geometric
+ones. The built-in terms use the same mechanism:
+
+- **Joint compliance under gravity** (`compliance`): ``Δ_i = c_i τ_i(q)``, τ_i the gravity
+  torque about joint i of the bodies beyond it, from their masses and centres of mass
+  (``c{i}``, rad/(N·m)). The torques are computed on the rigid chain: the deflection's
+  effect on the torques is second order (1e-6 of them for 1e-6 rad/(N·m)).
+- **Joint-angle harmonics** (`harmonics`): ``Δ_i = Σ_k h{i}_s{k} sin(k q_i) +
+  h{i}_c{k} cos(k q_i)`` (rad): gear eccentricity, encoder errors.
+
+A user term: ``ErrorTerm(kind, joint, parameters, build)`` with
+``build(ctx: TermContext, term: ErrorTerm) -> SX`` (rad, for a revolute joint), attached
+with `Robot.with_terms`. `kind` names the function for the compiled-kernel cache: give it
+a new value whenever the function changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ..errors import CalibrationError
+
+STANDARD_GRAVITY = 9.80665  # m/s²
+
+
+@dataclass(frozen=True)
+class TermContext:
+    """What a term's function can build on, all CasADi SX.
+
+    Attributes
+    ----------
+    q : SX, shape (dof,)
+        Joint values, rad (R) or m (P).
+    p : callable(str) -> SX
+        A parameter's symbol by name (the term's own and any geometric one).
+    axes, points, bodies : lists
+        Per joint, on the rigid chain in the world frame: unit axis, a point on it, and
+        the pose of the body it moves (see `casecal.model.chainwalk.Walk`).
+    gravity : SX, shape (3,)
+        Gravity's acceleration in the world frame, m/s².
+    """
+
+    q: ca.SX
+    p: Callable
+    axes: list
+    points: list
+    bodies: list
+    gravity: ca.SX
+
+
+@dataclass(frozen=True)
+class ErrorTerm:
+    """An error term on joint `joint` (1-based) with its own parameters.
+
+    Attributes
+    ----------
+    kind : str
+        Names the term's function (and keys the kernel cache).
+    joint : int
+    parameters : tuple of str
+        New parameter names, unique on the robot.
+    build : callable(TermContext, ErrorTerm) -> SX
+        The term's value, rad.
+    values : tuple of float
+        The parameters' current values, SI (zeros by default).
+    data : tuple
+        Numbers the function reads (hashable), e.g. masses.
+    """
+
+    kind: str
+    joint: int
+    parameters: tuple[str, ...]
+    build: Callable = field(compare=False, repr=False)
+    values: tuple[float, ...] = ()
+    data: tuple = ()
+
+    def __post_init__(self):
+        object.__setattr__(self, "parameters", tuple(self.parameters))
+        values = tuple(float(v) for v in self.values) or (0.0,) * len(self.parameters)
+        if len(values) != len(self.parameters) or not all(np.isfinite(values)):
+            raise CalibrationError(
+                f"error term {self.kind!r} on joint {self.joint}: give one finite value per "
+                "parameter"
+            )
+        object.__setattr__(self, "values", values)
+
+    @property
+    def shape(self) -> tuple:
+        """What the symbolic graph depends on: everything but the values."""
+        return (self.kind, self.joint, self.parameters, self.data)
+
+
+def joint_deltas(terms, walk, q, p, gravity) -> list:
+    """Δ_i of every joint (SX, 0 where no term acts)."""
+    ctx = TermContext(q, p, walk.axes, walk.points, walk.bodies, gravity)
+    deltas = [ca.SX(0) for _ in range(q.numel())]
+    for term in terms:
+        deltas[term.joint - 1] = deltas[term.joint - 1] + term.build(ctx, term)
+    return deltas
+
+
+# --- built-in terms -----------------------------------------------------------------
+
+
+def gravity_torque(ctx: TermContext, joint: int, inertials) -> ca.SX:
+    """Gravity's torque about joint `joint` (1-based) of the bodies beyond it, N·m.
+
+    `inertials` holds per joint (mass kg, centre of mass xyz m in the body's frame), or
+    None for a body without mass.
+    """
+    i = joint - 1
+    torque = ca.SX(0)
+    for k in range(i, len(ctx.bodies)):
+        if inertials[k] is None:
+            continue
+        mass, com = inertials[k]
+        body = ctx.bodies[k]
+        centre = body[:3, :3] @ ca.DM(com) + body[:3, 3]
+        torque = torque + ca.dot(ca.cross(centre - ctx.points[i], mass * ctx.gravity), ctx.axes[i])
+    return torque
+
+
+def _compliance(ctx: TermContext, term: ErrorTerm) -> ca.SX:
+    (name,) = term.parameters
+    return ctx.p(name) * gravity_torque(ctx, term.joint, term.data)
+
+
+def compliance(joint: int, inertials, value: float = 0.0) -> ErrorTerm:
+    """Joint `joint`'s compliance ``c{joint}`` (rad/(N·m)) under the gravity torque of the
+    bodies beyond it (`inertials`: per joint (mass, com) or None)."""
+    data = tuple(None if x is None else (float(x[0]), tuple(map(float, x[1]))) for x in inertials)
+    return ErrorTerm("compliance", joint, (f"c{joint}",), _compliance, (value,), data)
+
+
+def _harmonics(ctx: TermContext, term: ErrorTerm) -> ca.SX:
+    (order,) = term.data
+    qi = ctx.q[term.joint - 1]
+    total = ca.SX(0)
+    for k in range(1, order + 1):
+        total = total + ctx.p(f"h{term.joint}_s{k}") * ca.sin(k * qi)
+        total = total + ctx.p(f"h{term.joint}_c{k}") * ca.cos(k * qi)
+    return total
+
+
+def harmonics(joint: int, order: int, values=()) -> ErrorTerm:
+    """``Σ_k h{joint}_s{k} sin(k q) + h{joint}_c{k} cos(k q)``, k = 1 … `order` (rad)."""
+    if not isinstance(order, int) or order < 1:
+        raise CalibrationError(f"harmonics of joint {joint}: order must be an integer >= 1")
+    names = tuple(f"h{joint}_{t}{k}" for k in range(1, order + 1) for t in ("s", "c"))
+    return ErrorTerm("harmonics", joint, names, _harmonics, tuple(values), (order,))
+
+
+def _lumped(ctx: TermContext, term: ErrorTerm) -> ca.SX:
+    i = term.joint - 1
+    down = ctx.gravity / STANDARD_GRAVITY  # unit vector: the lumped terms carry g
+    total = ca.SX(0)
+    for k in range(i, len(ctx.bodies)):
+        body = ctx.bodies[k]
+        moment = body[:3, :3] @ ca.vertcat(*(ctx.p(f"g{term.joint}_{k + 1}{a}") for a in "xyz"))
+        arm = (body[:3, 3] - ctx.points[i]) * ctx.p(f"g{term.joint}_{k + 1}m")
+        total = total + ca.dot(ca.cross(moment + arm, down), ctx.axes[i])
+    return total
+
+
+def lumped_compliance(joint: int, n_joints: int) -> ErrorTerm:
+    """Joint `joint`'s deflection under gravity with masses unknown, linear in lumped terms:
+    per body k beyond it, ``g{joint}_{k}m = c·m_k·g`` (rad/m) and ``g{joint}_{k}x/y/z =
+    c·m_k·g·r_k`` (rad, r_k the centre of mass in body k's frame)."""
+    names = tuple(
+        f"g{joint}_{k}{a}" for k in range(joint, n_joints + 1) for a in ("m", "x", "y", "z")
+    )
+    return ErrorTerm("lumped_compliance", joint, names, _lumped, (), (n_joints,))
+
+
+BUILT_IN = {"compliance": _compliance, "harmonics": _harmonics, "lumped_compliance": _lumped}
+
+
+def check_terms(robot) -> None:
+    """Raise CalibrationError unless `robot`'s terms, inertials and gravity fit it."""
+    n = len(robot.joints)
+    seen: set[str] = set()
+    for t in robot.terms:
+        if not isinstance(t, ErrorTerm) or not 1 <= t.joint <= n:
+            raise CalibrationError(f"robot {robot.name!r}: an error term on a joint it lacks")
+        if robot.joints[t.joint - 1].type != "R":
+            raise CalibrationError(
+                f"robot {robot.name!r}: error term {t.kind!r} on prismatic joint {t.joint}; "
+                "terms act on revolute joints"
+            )
+        clash = seen.intersection(t.parameters)
+        if clash:
+            raise CalibrationError(f"robot {robot.name!r}: parameter {sorted(clash)[0]!r} twice")
+        seen.update(t.parameters)
+    if robot.inertials and len(robot.inertials) != n:
+        raise CalibrationError(f"robot {robot.name!r}: give one inertial (or None) per joint")
+    g = np.asarray(robot.gravity, dtype=float)
+    if g.shape != (3,) or not np.isclose(np.linalg.norm(g), 1.0):
+        raise CalibrationError(f"robot {robot.name!r}: gravity must be a unit vector (x, y, z)")
+
+
+def compliance_terms(robot, joints=None) -> list[ErrorTerm]:
+    """Compliance terms of `robot` on `joints` (None: the revolute joints whose gravity
+    torque is not zero at every pose, judged on 64 poses within the limits)."""
+    n = len(robot.joints)
+    known = bool(robot.inertials) and any(x is not None for x in robot.inertials)
+    candidates = [i for i in range(1, n + 1) if robot.joints[i - 1].type == "R"]
+    chosen = candidates if joints is None else [int(j) for j in joints]
+    bad = [j for j in chosen if j not in candidates]
+    if bad:
+        raise CalibrationError(f"robot {robot.name!r}: joint {bad[0]} is not a revolute joint")
+    terms = [compliance(j, robot.inertials) if known else lumped_compliance(j, n) for j in chosen]
+    if joints is not None:
+        return terms
+    probe = robot.with_terms(*terms)
+    lo, hi = probe.limits.T
+    q = lo + (hi - lo) * np.random.default_rng(0).random((64, n))
+    moving = []
+    for t in terms:  # a joint whose gravity torque is zero at every pose carries no load
+        J, _ = probe.position_jacobian(q, list(t.parameters))
+        moving.append(np.abs(J).max() > 1e-12)
+    return [t for t, m in zip(terms, moving, strict=True) if m]

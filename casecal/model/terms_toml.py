@@ -1,0 +1,132 @@
+"""Error terms, masses and gravity in robot files (TOML).
+
+Per ``[[joints]]`` row, optionally ``mass`` (kg) and ``com`` (the centre of mass of the
+body the joint moves, in its frame, length unit); at the top level ``gravity`` (a
+direction in the base frame, default ``[0, 0, -1]``); and the tables::
+
+    [compliance]          # c{i} with masses, lumped g{i}_{k}* without; values in SI
+    joints = [2, 3]
+    c2 = 1.1e-6
+
+    [harmonics]           # h{i}_s{k}, h{i}_c{k} in the file's angle unit
+    orders = [[2, 2]]     # [joint, order] pairs
+    h2_s1 = 0.002
+
+A robot with a term written in Python (`casecal.model.terms.ErrorTerm`) cannot be saved:
+its function is not data.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import CalibrationError
+from .terms import compliance_terms, harmonics
+
+TOP_KEYS = {"gravity", "compliance", "harmonics"}
+ROW_KEYS = {"mass", "com"}
+
+
+def split_rows(rows: list[dict], length: float, label: str, number) -> tuple[list[dict], tuple]:
+    """The rows without ``mass``/``com``, and the inertials they gave (() when none did)."""
+    inertials, plain = [], []
+    for i, row in enumerate(rows, start=1):
+        if "mass" in row or "com" in row:
+            com = row.get("com", [0, 0, 0])
+            if not isinstance(com, list) or len(com) != 3 or "mass" not in row:
+                raise CalibrationError(
+                    f"{label}: joints[{i}] needs mass = <kg> and com = [x, y, z] together"
+                )
+            mass = number(row["mass"], label, f"joints[{i}].mass")
+            if mass < 0:
+                raise CalibrationError(f"{label}: joints[{i}].mass is negative")
+            xyz = tuple(number(v, label, f"joints[{i}].com") * length for v in com)
+            inertials.append((mass, xyz))
+        else:
+            inertials.append(None)
+        plain.append({k: v for k, v in row.items() if k not in ROW_KEYS})
+    return plain, (tuple(inertials) if any(x is not None for x in inertials) else ())
+
+
+def add_terms(robot, data: dict, angle: float, label: str, number):
+    """`robot` with the gravity, compliance and harmonics of the file `data`."""
+    import dataclasses
+
+    if "gravity" in data:
+        g = data["gravity"]
+        if not isinstance(g, list) or len(g) != 3:
+            raise CalibrationError(f"{label}: gravity must be a direction [x, y, z]")
+        g = np.array([number(v, label, "gravity") for v in g])
+        if not np.linalg.norm(g) > 0:
+            raise CalibrationError(f"{label}: gravity must not be zero")
+        robot = dataclasses.replace(robot, gravity=tuple(g / np.linalg.norm(g)), auto_beta=False)
+    values = {}
+    terms = []
+    if "compliance" in data:
+        table = _table(data, "compliance", label)
+        joints = table.pop("joints", None)
+        if joints is not None and not (isinstance(joints, list) and joints):
+            raise CalibrationError(f"{label}: compliance.joints must be a list of joints")
+        terms += compliance_terms(robot, joints)
+        values.update({k: number(v, label, f"compliance.{k}") for k, v in table.items()})
+    if "harmonics" in data:
+        table = _table(data, "harmonics", label)
+        orders = table.pop("orders", None)
+        if not isinstance(orders, list) or not all(
+            isinstance(p, list) and len(p) == 2 and all(isinstance(v, int) for v in p)
+            for p in orders
+        ):
+            raise CalibrationError(f"{label}: harmonics.orders must be [[joint, order], ...]")
+        terms += [harmonics(j, k) for j, k in orders]
+        values.update({k: number(v, label, f"harmonics.{k}") * angle for k, v in table.items()})
+    if not terms:
+        return robot
+    robot = robot.with_terms(*terms)
+    unknown = sorted(set(values) - set(robot.parameter_names))
+    if unknown:
+        raise CalibrationError(f"{label}: {unknown[0]!r} is not a parameter of these terms")
+    return robot.with_parameters(values) if values else robot
+
+
+def _table(data: dict, key: str, label: str) -> dict:
+    table = data[key]
+    if not isinstance(table, dict):
+        raise CalibrationError(f"{label}: [{key}] must be a table")
+    return dict(table)
+
+
+def terms_lines(robot) -> list[str]:
+    """TOML lines (m, rad, SI terms) for `robot`'s gravity and terms; raises for a term
+    written in Python."""
+    lines = []
+    if tuple(robot.gravity) != (0.0, 0.0, -1.0):
+        lines.append("gravity = [" + ", ".join(repr(float(v)) for v in robot.gravity) + "]")
+    by_kind: dict[str, list] = {}
+    for t in robot.terms:
+        by_kind.setdefault(t.kind, []).append(t)
+    other = set(by_kind) - {"compliance", "lumped_compliance", "harmonics"}
+    if other:
+        raise CalibrationError(
+            f"robot {robot.name!r}: error term {sorted(other)[0]!r} is Python code, not data, "
+            "and cannot be saved in a robot file; keep its values (--deviations-out) and "
+            "attach the term again with Robot.with_terms"
+        )
+    comp = by_kind.get("compliance", []) + by_kind.get("lumped_compliance", [])
+    if comp:
+        lines += ["", "[compliance]", f"joints = {[t.joint for t in comp]}"]
+        lines += [f"{n} = {v!r}" for t in comp for n, v in zip(t.parameters, t.values, strict=True)]
+    if "harmonics" in by_kind:
+        terms = by_kind["harmonics"]
+        lines += ["", "[harmonics]", f"orders = {[[t.joint, t.data[0]] for t in terms]}"]
+        lines += [
+            f"{n} = {v!r}" for t in terms for n, v in zip(t.parameters, t.values, strict=True)
+        ]
+    return lines
+
+
+def inertial_lines(robot, i: int) -> list[str]:
+    """``mass`` and ``com`` lines of joint `i` (0-based), if the robot has them."""
+    if not robot.inertials or robot.inertials[i] is None:
+        return []
+    mass, com = robot.inertials[i]
+    return [f"mass = {float(mass)!r}", "com = [" + ", ".join(repr(float(v)) for v in com) + "]"]
