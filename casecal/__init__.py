@@ -28,6 +28,7 @@ _PUBLIC = {
     "Robot": "model.robot",
     "Validation": "identification.validation",
     "calibrate_until": "design.campaign",
+    "compare_models": "identification.compare",
     "compensate": "model.compensate",
     "identify": "identification.fit",
     "load_robot": "model.catalog",

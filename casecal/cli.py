@@ -693,9 +693,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_validate)
 
-    from .cli_compensate import add_command
+    from . import cli_compare, cli_compensate
 
-    add_command(command)
+    cli_compensate.add_command(command)
+    cli_compare.add_command(command)
 
     p = command(
         "report",

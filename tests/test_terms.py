@@ -159,3 +159,36 @@ def test_compensate_applies_the_full_model():
     flat = dataclasses.replace(true, base=nominal.base, auto_beta=False)
     want = nominal.fk(q[out.ok])[:, :3, 3]
     assert np.abs(flat.fk(out.q[out.ok])[:, :3, 3] - want).max() < 1e-9
+
+
+def _models():
+    return {
+        "rigid": heavy(),
+        "+ compliance": heavy().with_compliance([2, 3]),
+        "+ harmonics": heavy().with_compliance([2, 3]).with_joint_harmonics(2, 1),
+    }
+
+
+@pytest.mark.parametrize("data", ["rigid", "compliant"])
+def test_model_comparison_picks_the_true_model(data):
+    rigid_truth = heavy().with_deviations({"a2": 3e-4, "theta3": 2e-4, "base_x": 2.0})
+    true = true_robot() if data == "compliant" else rigid_truth
+    q = cc.poses.uniform(heavy(), 80, seed=1)
+    result = cc.compare_models(_models(), cc.simulate(true, q, noise=SIGMA, seed=2))
+    assert result.best == ("+ compliance" if data == "compliant" else "rigid")
+    assert list(result.table.model) == list(_models())
+    assert "chosen by cross-validation" in str(result)
+
+
+def test_the_command_line_compares_models(tmp_path, capsys):
+    from casecal.cli import main
+
+    robot = heavy()
+    cc.save_robot(robot, tmp_path / "heavy.toml")
+    q = cc.poses.uniform(robot, 60, seed=3)
+    cc.write_csv(tmp_path / "m.csv", cc.simulate(true_robot(), q, noise=SIGMA, seed=4), robot)
+    argv = ["compare", str(tmp_path / "heavy.toml"), str(tmp_path / "m.csv"), "--compliance"]
+    assert main([*argv, "--folds", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "chosen by cross-validation: + compliance" in out
+    assert main([*argv[:3], "--harmonics", "2"]) == 2

@@ -1,0 +1,62 @@
+"""``casecal compare``: which error model the data support (a leaf of the command line)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+
+def add_command(command) -> None:
+    """Register ``compare`` with `command(name, **kwargs)` (cli.build_parser's helper)."""
+    p = command(
+        "compare",
+        help="fit nested error models and say which the data support (cross-validation)",
+        description="Fit the rigid robot, then with gravity compliance (--compliance), then "
+        "with joint-angle harmonics (--harmonics), each to the same poses with all its "
+        "parameters, and print per model the parameters estimated, in-sample and k-fold "
+        "cross-validated RMS (mm per point) and AIC/BIC. The chosen model has the fewest "
+        "parameters within one standard error of the best cross-validated RMS.",
+    )
+    p.add_argument("robot", metavar="ROBOT", help="catalog name, .toml or .urdf path")
+    p.add_argument("measurements", metavar="CSV", help="measurement file")
+    p.add_argument(
+        "--compliance",
+        action="store_true",
+        help="add gravity compliance on every loaded joint (c_i with masses in the robot "
+        "file, lumped terms without)",
+    )
+    p.add_argument(
+        "--harmonics",
+        action="append",
+        default=[],
+        metavar="JOINT:ORDER",
+        help="add harmonics of a joint's angle up to ORDER (repeatable), e.g. 2:2",
+    )
+    p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> None:
+    from .data.files import read_csv
+    from .errors import CalibrationError
+    from .identification.compare import compare_models
+    from .model.catalog import load_robot
+
+    robot = load_robot(args.robot)
+    rigid = dataclasses.replace(robot, terms=(), auto_beta=False)
+    models = {"rigid": rigid}
+    current = rigid
+    if args.compliance:
+        current = current.with_compliance()
+        models["+ compliance"] = current
+    for spec in args.harmonics:
+        try:
+            joint, order = (int(v) for v in spec.split(":"))
+        except ValueError:
+            raise CalibrationError(f"--harmonics {spec!r}: give JOINT:ORDER, e.g. 2:2") from None
+        current = current.with_joint_harmonics(joint, order)
+        models[f"+ harmonics {joint}:{order}"] = current
+    if len(models) == 1:
+        raise CalibrationError("nothing to compare: add --compliance and/or --harmonics J:K")
+    meas = read_csv(args.measurements, robot)
+    print(compare_models(models, meas, folds=args.folds))
