@@ -701,12 +701,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = command(
         "report",
         help="run every study and write the PDF report, figures and tables",
-        description="Run the nine studies (the paper's Table 1; planar arms; SCARA observability; "
+        description="Run the ten studies (the paper's Table 1; planar arms; SCARA observability; "
         "pose count; noise; six-axis arms with Hayati's beta; optimal poses; calibrate until a "
-        "target; relative measurements) and write casecal-report.pdf with every figure as PNG "
-        "and every table as CSV into the output folder. About 2 minutes on 2 idle cores "
-        "(--quick: about 30 s); the first run on a machine also compiles its kernels, about "
-        "15 s more.",
+        "target; relative measurements; compliance under gravity) and write "
+        "casecal-report.pdf with every figure as PNG and every table as CSV into the "
+        "output folder. About 2 minutes on 2 idle cores (--quick: about 30 s); the first "
+        "run on a machine also compiles its kernels, about 15 s more.",
     )
     p.add_argument(
         "-o", "--output", default="reports", metavar="DIR", help="output folder (default reports/)"

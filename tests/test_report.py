@@ -88,3 +88,15 @@ def test_quick_report(tmp_path):
         with_beta = big[robot][big[robot].index.str.contains("β")].iloc[0]
         standard = big[robot][big[robot].index.str.startswith("standard")].iloc[0]
         assert with_beta < 0.5 * standard
+
+
+def test_compliance_study(tmp_path):
+    (result,) = run_studies(
+        ["compliance"], tmp_path, quick=True, run=study_runner("serial", progress=False)
+    )
+    df = pd.read_csv(tmp_path / "compliance_trials.csv")
+    rigid, known = df[df.model == "rigid"], df[df.model == "compliance, masses known"]
+    assert not rigid.success.any() and rigid.rms_holdout_mm.min() > 1.0  # mm: it cannot bend
+    assert known.success.all() and known.rms_holdout_mm.max() < 0.05
+    caption = result.figures[0].caption
+    assert "fail their answer audit" in caption and "nan" not in caption.lower()

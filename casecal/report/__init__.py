@@ -16,6 +16,7 @@ from .common import StudyResult, style
 from .folder import building_folder, publish
 from .pose_count import pose_count_sweep
 from .studies_beyond import enough_poses, optimal_poses, relative_measurements
+from .studies_compliance import compliance_study
 from .studies_paper import planar_arms, scara_observability, table1
 from .studies_sweeps import noise_sweep, six_axis
 
@@ -29,6 +30,7 @@ STUDIES: dict[str, Callable] = {
     "optimal_poses": optimal_poses,
     "calibrate_until": enough_poses,
     "relative": relative_measurements,
+    "compliance": compliance_study,
 }
 NAMES = {
     "table1": "the paper's Table 1",
@@ -40,6 +42,7 @@ NAMES = {
     "optimal_poses": "optimal poses",
     "calibrate_until": "calibrate until a target",
     "relative": "relative measurements",
+    "compliance": "compliance under gravity",
 }
 """Each study in words, as ``casecal report --help`` and the title page name them."""
 PDF_TABLES = {"table1", "scara_blind_spots", "six_axis_observability"}
