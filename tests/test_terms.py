@@ -192,3 +192,49 @@ def test_the_command_line_compares_models(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "chosen by cross-validation: + compliance" in out
     assert main([*argv[:3], "--harmonics", "2"]) == 2
+
+
+def test_urdf_masses_give_the_textbook_gravity_torque(tmp_path):
+    """Two links in a vertical plane, joints about y: at q = 0 the arm is horizontal and
+    gravity's torques are g (m1 L1/2 + m2 (L1 + L2/2)) and g m2 L2/2 (N·m)."""
+    m1, m2, l1, l2 = 12.0, 5.0, 0.8, 0.6
+    link = '<link name="{0}"><inertial><origin xyz="{1} 0 0"/><mass value="{2}"/></inertial></link>'
+    text = f"""<robot name="planar">
+      <link name="base"/>{link.format("l1", l1 / 2, m1)}{link.format("l2", l2 / 2, m2)}
+      <link name="tip"/>
+      <joint name="j1" type="continuous"><parent link="base"/><child link="l1"/>
+        <axis xyz="0 1 0"/></joint>
+      <joint name="j2" type="continuous"><parent link="l1"/><child link="l2"/>
+        <origin xyz="{l1} 0 0"/><axis xyz="0 1 0"/></joint>
+      <joint name="t" type="fixed"><parent link="l2"/><child link="tip"/>
+        <origin xyz="{l2} 0 0"/></joint>
+    </robot>"""
+    (tmp_path / "planar.urdf").write_text(text)
+    robot = cc.load_robot(tmp_path / "planar.urdf")
+    assert robot.inertials == ((m1, (l1 / 2, 0.0, 0.0)), (m2, (l2 / 2, 0.0, 0.0)))
+    bent = robot.with_compliance().with_parameters({"c1": 2e-6, "c2": 3e-6})
+    g = 9.80665
+    torque = np.array([g * (m1 * l1 / 2 + m2 * (l1 + l2 / 2)), g * m2 * l2 / 2])
+    q = np.zeros((1, 2))
+    deflected = q + np.array([2e-6, 3e-6]) * torque
+    assert np.abs(bent.fk(q) - robot.fk(deflected)).max() < 1e-15
+    assert robot.fk(deflected)[0, 2, 3] < 0  # the tip sinks
+
+
+def test_a_term_written_by_the_user_is_recovered():
+    """A belt that couples joint 3 to joint 2: Δθ3 = k·q2, written as a user term."""
+    from casecal.model.terms import ErrorTerm
+
+    def coupling(ctx, term):
+        return ctx.p("k23") * ctx.q[1]
+
+    robot = cc.load_robot("puma560").with_points(MARKER)
+    robot = robot.with_terms(ErrorTerm("belt coupling v1", 3, ("k23",), coupling))
+    true = robot.with_deviations({"k23": 2e-4, "a2": 3e-4})
+    meas = cc.simulate(true, cc.poses.uniform(robot, 60, seed=8), noise=SIGMA, seed=9)
+    cal = cc.identify(robot, meas, "all")
+    assert cal.success, cal.message
+    assert abs(cal.deviations["k23"] - 2e-4) < 4 * cal.standard_errors["k23"]
+    assert held_out(cal, true) < SIGMA * np.sqrt(3)
+    with pytest.raises(cc.CalibrationError, match="Python code, not data"):
+        cc.save_robot(cal.robot, "never-written.toml")

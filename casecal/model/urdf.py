@@ -231,10 +231,18 @@ def read_urdf(
 
     root, joints = parse(text, label)
     path, base_link, tip_link = chain_path(joints, base_link, tip_link, label)
-    out, pending = [], np.eye(4)
+    masses = _link_inertials(root, label)
+    out, pending, bodies, since = [], np.eye(4), [], np.eye(4)
+
+    def carry(link: str) -> None:  # the link's mass, in the frame of the body it rides on
+        if bodies and link in masses:
+            mass, com = masses[link]
+            bodies[-1].append((mass, since[:3, :3] @ com + since[:3, 3]))
+
     for j in path:
         if j.kind == "fixed":
-            pending = pending @ j.T
+            pending, since = pending @ j.T, since @ j.T
+            carry(j.child)
             continue
         if j.kind not in MOVABLE:
             raise CalibrationError(
@@ -250,11 +258,15 @@ def read_urdf(
         # matrix would cost digits
         xyz, rpy = (j.xyz, j.rpy) if np.array_equal(pending, np.eye(4)) else split(pending @ j.T)
         out.append(UrdfJoint(j.name, MOVABLE[j.kind], j.axis, xyz, rpy, 0.0, j.limits))
-        pending = np.eye(4)
+        pending, since = np.eye(4), np.eye(4)
+        bodies.append([])
+        carry(j.child)
     if not out:
         raise CalibrationError(f"{label}: no movable joint between {base_link!r} and {tip_link!r}")
     tool_xyz, tool_rpy = split(pending)
+    inertials = tuple(_combined(parts) for parts in bodies)
     return Robot(
+        inertials=inertials if any(x is not None for x in inertials) else (),
         name=root.get("name") or Path(label).stem,
         joints=tuple(out),
         convention="urdf",
@@ -263,6 +275,31 @@ def read_urdf(
         source=(label,),
         urdf=UrdfSource(text, base_link, tip_link),
     )
+
+
+def _link_inertials(root: ET.Element, label: str) -> dict[str, tuple[float, np.ndarray]]:
+    """Each link's mass (kg) and centre of mass (m, link frame) from its <inertial>."""
+    out = {}
+    for link in root.iter("link"):
+        inertial = link.find("inertial")
+        if inertial is None or inertial.find("mass") is None:
+            continue
+        where = f"{label}, link {link.get('name')!r}"
+        mass = _numbers(inertial.find("mass").get("value"), 1, "mass", where)[0]
+        origin = inertial.find("origin")
+        com = _numbers(None if origin is None else origin.get("xyz"), 3, "inertial xyz", where)
+        if mass > 0:
+            out[link.get("name", "")] = (mass, np.array(com))
+    return out
+
+
+def _combined(parts) -> tuple[float, tuple[float, float, float]] | None:
+    """One body's mass and centre of mass from the links riding on it, or None."""
+    total = sum(m for m, _ in parts)
+    if total <= 0:
+        return None
+    com = parts[0][1] if len(parts) == 1 else sum(m * c for m, c in parts) / total
+    return float(total), tuple(float(v) for v in com)
 
 
 def load_urdf(path: Path, base_link: str | None = None, tip_link: str | None = None):
