@@ -59,7 +59,7 @@ def _schedule(robot, args):
 
 
 def _cmd_simulate(args: argparse.Namespace) -> None:
-    robot = load_robot(args.robot)
+    robot = robot_for(args, args.robot)
     if not args.output.strip():
         raise CalibrationError("the output file name is empty; give a file name with -o")
     _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
@@ -96,7 +96,7 @@ def parse_angle(text: str) -> float:
 
 
 def _cmd_identify(args: argparse.Namespace) -> None:
-    robot = load_robot(args.robot)
+    robot = robot_for(args, args.robot)
     if args.pairs:
         unsupported = [
             flag
@@ -262,7 +262,7 @@ def _deviations_text(cal, path: str) -> str:
 def _cmd_calibrate_until(args: argparse.Namespace) -> None:
     from .design.campaign import calibrate_until, pool_measure
 
-    robot = load_robot(args.robot)
+    robot = robot_for(args, args.robot)
     pool = read_csv(args.pool, robot)
     if args.output:
         _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
@@ -289,13 +289,13 @@ def _cmd_calibrate_until(args: argparse.Namespace) -> None:
 
 
 def _cmd_validate(args: argparse.Namespace) -> None:
-    calibrated = load_robot(args.calibrated)
+    calibrated = robot_for(args, args.calibrated)
     nominal_name = args.nominal or calibrated.calibrated_from
     if not nominal_name:
         raise CalibrationError(
             f"{args.calibrated} does not say which robot it was calibrated from; give --nominal"
         )
-    nominal = load_robot(nominal_name)
+    nominal = robot_for(args, nominal_name)
     if (
         nominal.structure.names[: len(nominal.parameter_names)]
         != calibrated.parameter_names[: len(nominal.parameter_names)]
@@ -341,7 +341,7 @@ def _check_writable_dir(path) -> None:
 
 
 def _cmd_observability(args: argparse.Namespace) -> None:
-    robot = load_robot(args.robot)
+    robot = robot_for(args, args.robot)
     q = _schedule(robot, args)
     obs = observability(robot, q, args.parameters)
     print(f"{robot.name}, {args.schedule} schedule, {args.poses} poses")
@@ -351,7 +351,7 @@ def _cmd_observability(args: argparse.Namespace) -> None:
 def _cmd_robots(args: argparse.Namespace) -> None:
     rows = []
     for name in robots():
-        robot = load_robot(name)
+        robot = robot_for(args, name)
         source = robot.source[0] if robot.source else ""
         rows.append(
             (name, str(robot.dof), robot.joint_types, robot.convention, robot.full_name, source)
@@ -385,12 +385,20 @@ def _show_urdf(robot, deg: float, mm: float) -> None:
         print(f"{label}: xyz = ({xyz}) mm, rpy = ({rpy}) deg")
 
 
+def robot_for(args: argparse.Namespace, name: str):
+    """`load_robot(name)`, with --base-link and --tip-link for a URDF file."""
+    if str(name).endswith((".urdf", ".xacro")):
+        ends = {k: getattr(args, k, None) for k in ("base_link", "tip_link")}
+        return load_robot(name, **ends)
+    return load_robot(name)
+
+
 def _fmt(value: float, width: int = 10) -> str:
     return f"{value:{width}.4f}"
 
 
 def _cmd_show(args: argparse.Namespace) -> None:
-    robot = load_robot(args.robot)
+    robot = robot_for(args, args.robot)
     deg, mm = 180.0 / math.pi, 1e3
     if robot.convention == "urdf":
         _show_urdf(robot, deg, mm)
@@ -473,6 +481,14 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument(
         "-v", "--verbose", action="count", default=argparse.SUPPRESS, help=argparse.SUPPRESS
     )
+    for end in ("base", "tip"):
+        common.add_argument(
+            f"--{end}-link",
+            metavar="LINK",
+            default=argparse.SUPPRESS,
+            help=f"URDF robots: the chain's {end} link (default: "
+            + ("the root)" if end == "base" else "the end of the one movable chain)"),
+        )
 
     def command(name, **kwargs):
         return sub.add_parser(name, parents=[common], **kwargs)

@@ -37,12 +37,12 @@ def add_command(command) -> None:
 
 
 def run(args: argparse.Namespace) -> None:
+    from . import cli
     from .data.files import read_csv
     from .errors import CalibrationError
     from .identification.compare import compare_models
-    from .model.catalog import load_robot
 
-    robot = load_robot(args.robot)
+    robot = cli.robot_for(args, args.robot)
     rigid = dataclasses.replace(robot, terms=(), auto_beta=False)
     models = {"rigid": rigid}
     current = rigid

@@ -35,12 +35,11 @@ def add_command(command) -> None:
 def run(args: argparse.Namespace) -> None:
     from . import cli
     from .data.files import read_joints, read_table
-    from .model.catalog import load_robot
     from .model.compensate import compensate
     from .textio import write_atomic
 
-    calibrated = load_robot(args.robot)
-    nominal = load_robot(args.nominal) if args.nominal else None
+    calibrated = cli.robot_for(args, args.robot)
+    nominal = cli.robot_for(args, args.nominal) if args.nominal else None
     df, label = read_table(args.targets)
     q = read_joints(df, calibrated, label)
     result = compensate(calibrated, q, nominal)

@@ -144,6 +144,8 @@ def test_a_tree_without_a_tip_names_the_candidates(tmp_path):
     with pytest.raises(cc.CalibrationError, match="tip_link= one of l, r"):
         cc.load_robot(tmp_path / "y.urdf")
     assert cc.load_robot(tmp_path / "y.urdf", tip_link="r").parameter_names[0] == "jr.x"
+    assert main(["show", str(tmp_path / "y.urdf")]) == 2
+    assert main(["show", str(tmp_path / "y.urdf"), "--tip-link", "r"]) == 0
 
 
 def test_the_command_line_reads_and_writes_urdf(tmp_path, capsys):
@@ -191,5 +193,20 @@ def test_a_xacro_file_expands_to_the_same_robot(tmp_path):
         '<robot name="f" xmlns:xacro="http://www.ros.org/wiki/xacro">'
         '<xacro:include filename="$(find nowhere)/x.xacro"/></robot>'
     )
-    with pytest.raises(cc.CalibrationError, match=r"xacro FILE > robot\.urdf"):
+    with pytest.raises(cc.CalibrationError, match=r"packages=\{name: folder\}"):
         cc.load_robot(tmp_path / "find.xacro")
+
+
+def test_the_panda_from_xacro_agrees_with_roboticstoolbox():
+    """rtbdata ships the Panda as xacro that finds ROS packages; casecal expands it with
+    the package folders named, as roboticstoolbox does for its own model."""
+    pytest.importorskip("xacrodoc")
+    root = Path(rtbdata.__file__).parent / "xacro"
+    folders = {d.name: str(d) for d in root.iterdir() if d.is_dir()}
+    path = root / "qut_frankie_description" / "robots" / "panda_arm_hand.urdf.xacro"
+    robot = cc.load_robot(path, packages=folders, tip_link="panda_hand")
+    assert robot.dof == 7
+    theirs = rtb.models.URDF.Panda()
+    q = cc.poses.uniform(robot, 30, seed=0)
+    reference = np.array([theirs.fkine(row, end="panda_hand").A for row in q])
+    assert np.abs(reference - robot.fk(q)).max() < 1e-12

@@ -77,7 +77,10 @@ def robots() -> list[str]:
 
 
 def load_robot(
-    name_or_path: str | Path, base_link: str | None = None, tip_link: str | None = None
+    name_or_path: str | Path,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    packages: dict[str, str] | None = None,
 ) -> Robot:
     """Load a robot from the catalog by name, or from a TOML or URDF file by path.
 
@@ -89,6 +92,8 @@ def load_robot(
         ``kinematics:`` file (``.yaml``, `casecal.model.ur_kinematics`).
     base_link, tip_link : str, optional
         URDF only: the chain's ends (defaults in `casecal.model.urdf.read_urdf`).
+    packages : dict of str to str, optional
+        xacro only: ROS package name to folder, for ``$(find ...)``.
 
     Returns
     -------
@@ -105,13 +110,13 @@ def load_robot(
     if path.suffix in (".urdf", ".xacro"):
         from .urdf import load_urdf
 
-        return load_urdf(path, base_link, tip_link)
+        return load_urdf(path, base_link, tip_link, packages)
     if path.suffix in (".yaml", ".yml"):
         from .ur_kinematics import read_ur_kinematics
 
         return read_ur_kinematics(read_text(path, "UR kinematics file"), str(path), path.stem)
-    if base_link is not None or tip_link is not None:
-        raise CalibrationError("base_link= and tip_link= apply to URDF files only")
+    if base_link is not None or tip_link is not None or packages is not None:
+        raise CalibrationError("base_link=, tip_link= and packages= apply to URDF files only")
     if path.suffix == ".toml" or path.exists() or "/" in text or "\\" in text:
         label, source = str(path), read_text(path, "robot file")
     else:

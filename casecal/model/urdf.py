@@ -302,29 +302,60 @@ def _combined(parts) -> tuple[float, tuple[float, float, float]] | None:
     return float(total), tuple(float(v) for v in com)
 
 
-def load_urdf(path: Path, base_link: str | None = None, tip_link: str | None = None):
-    """Read a ``.urdf`` file, or expand a ``.xacro`` one (needs the xacro extra)."""
+def load_urdf(
+    path: Path,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    packages: dict[str, str] | None = None,
+):
+    """Read a ``.urdf`` file, or expand a ``.xacro`` one (the ``urdf`` extra).
+
+    `packages` maps ROS package names to folders for ``$(find pkg)`` and
+    ``package://`` in a xacro file; folders above the file are found by themselves.
+    """
     from ..textio import read_text
 
     if path.suffix == ".xacro" or path.name.endswith(".urdf.xacro"):
+        text = _expand_xacro(path, packages or {})
+    else:
+        text = read_text(path, "URDF file")
+    return read_urdf(text, str(path), base_link, tip_link)
+
+
+def _expand_xacro(path: Path, packages: dict[str, str]) -> str:
+    """The URDF text of a xacro file, by xacrodoc (which resolves ROS packages without a
+    ROS install), else by the xacro package."""
+    if not path.is_file():
+        raise CalibrationError(f"{path}: no such file")
+    try:
+        from xacrodoc import XacroDoc
+        from xacrodoc import packages as known
+
+        def expand() -> str:
+            known.walk_up_from(str(path))
+            known.update_package_cache(dict(packages))
+            return XacroDoc.from_file(str(path)).to_urdf_string()
+
+    except ImportError:
         try:
             import xacro
         except ImportError:
             raise CalibrationError(
-                f"{path}: a .xacro file needs the xacro package: pip install 'casecal[urdf]'"
+                f"{path}: a .xacro file needs the urdf extra: pip install 'casecal[urdf]'"
             ) from None
-        try:
-            text = xacro.process_file(str(path)).toxml()
-        except Exception as exc:  # xacro raises its own and many builtin types
-            detail = " ".join(str(exc).split())
-            raise CalibrationError(
-                f"{path}: xacro could not expand it ({detail}); a file that finds ROS "
-                "packages ($(find ...)) expands in its workspace: run 'xacro FILE > "
-                "robot.urdf' there and load the .urdf"
-            ) from None
-    else:
-        text = read_text(path, "URDF file")
-    return read_urdf(text, str(path), base_link, tip_link)
+
+        def expand() -> str:
+            return xacro.process_file(str(path)).toxml()
+
+    try:
+        return expand()
+    except Exception as exc:  # xacro raises its own and many builtin types
+        detail = " ".join(str(exc).split())
+        raise CalibrationError(
+            f"{path}: xacro could not expand it ({detail}); name the ROS packages it "
+            "finds with packages={name: folder}, or run 'xacro FILE > robot.urdf' in its "
+            "workspace and load the .urdf"
+        ) from None
 
 
 _ROW_KEYS = {"name", "type", "axis", "xyz", "rpy", "offset", "limits"}
