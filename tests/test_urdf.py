@@ -210,3 +210,42 @@ def test_the_panda_from_xacro_agrees_with_roboticstoolbox():
     q = cc.poses.uniform(robot, 30, seed=0)
     reference = np.array([theirs.fkine(row, end="panda_hand").A for row in q])
     assert np.abs(reference - robot.fk(q)).max() < 1e-12
+
+
+def _three_joints(mimic: str) -> str:
+    limit = '<limit lower="-2" upper="2" effort="1" velocity="1"/>'
+    return f"""<robot name="par">
+      <link name="b"/><link name="l1"/><link name="l2"/><link name="l3"/><link name="tip"/>
+      <joint name="j1" type="revolute"><parent link="b"/><child link="l1"/>
+        <origin xyz="0 0 0.4"/><axis xyz="0 1 0"/>{limit}</joint>
+      <joint name="m1" type="revolute"><parent link="l1"/><child link="l2"/>
+        <origin xyz="0.5 0 0" rpy="0.1 0 0"/><axis xyz="0 1 0"/>{limit}{mimic}</joint>
+      <joint name="j2" type="revolute"><parent link="l2"/><child link="l3"/>
+        <origin xyz="0.4 0 0.05"/><axis xyz="0 0 1"/>{limit}</joint>
+      <joint name="t" type="fixed"><parent link="l3"/><child link="tip"/>
+        <origin xyz="0.2 0 0"/></joint>
+    </robot>"""
+
+
+def test_a_mimic_joint_follows_its_master(tmp_path):
+    (tmp_path / "mimic.urdf").write_text(
+        _three_joints('<mimic joint="j1" multiplier="0.5" offset="0.1"/>')
+    )
+    (tmp_path / "plain.urdf").write_text(_three_joints(""))
+    robot = cc.load_robot(tmp_path / "mimic.urdf")
+    assert robot.dof == 2 and "m1.yaw" in robot.parameter_names
+    q = cc.poses.uniform(robot, 30, seed=0)
+    moved = np.column_stack([q[:, 0], 0.5 * q[:, 0] + 0.1, q[:, 1]])
+    assert np.abs(oracle(tmp_path / "plain.urdf")(moved, "tip") - robot.fk(q)).max() < 1e-12
+    changed = robot.with_deviations({"m1.x": 1e-3, "m1.yaw": 2e-3, "j1.offset": 1e-3})
+    for name in ("out.urdf", "out.toml"):
+        cc.save_robot(changed, tmp_path / name)
+        assert np.abs(cc.load_robot(tmp_path / name).fk(q) - changed.fk(q)).max() < 1e-12
+    marker = [[0.05, 0.02, 0.03]]
+    true = changed.with_points(marker)
+    meas = cc.simulate(true, cc.poses.uniform(robot, 60, seed=1), noise=2e-5, seed=2)
+    cal = cc.identify(robot.with_points(marker), meas, "all")
+    assert cal.success, cal.message
+    q_new = cc.poses.uniform(robot, 200, seed=3)
+    err = cal.robot.measured_points(q_new) - true.measured_points(q_new)
+    assert np.sqrt(np.mean(np.sum(err**2, axis=-1))) < 2e-5 * np.sqrt(3)

@@ -159,7 +159,7 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     for i, row in enumerate(rows, start=1):
         where = f"joints[{i}]"
         if convention == "urdf":
-            from .urdf import joint_from_row
+            from .urdf_toml import joint_from_row
 
             joints.append(joint_from_row(row, where, length, angle, label, _number))
             continue
@@ -300,7 +300,7 @@ def robot_to_toml(robot: Robot) -> str:
         lines.append(f"calibrated_from = {_q(robot.calibrated_from)}")
     for i, j in enumerate(robot.joints):
         if robot.convention == "urdf":
-            from .urdf import joint_to_lines
+            from .urdf_toml import joint_to_lines
 
             lines += ["", "[[joints]]", *joint_to_lines(j, _q), *inertial_lines(robot, i)]
             continue

@@ -38,9 +38,20 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict) -> Walk:
 
     T, axes, points, bodies = base, [], [], []
     if structure.convention == "urdf":
-        for jt, name, axis, q in zip(
-            structure.joint_types, structure.joint_names, structure.axes, q_eff, strict=True
+        passive = structure.passive or ((),) * len(q_eff)
+        for jt, name, axis, q, before in zip(
+            structure.joint_types,
+            structure.joint_names,
+            structure.axes,
+            q_eff,
+            passive,
+            strict=True,
         ):
+            for p_name, p_type, p_axis, master, multiplier, offset in before:
+                xyz = [P[f"{p_name}.{c}"] for c in "xyz"]
+                rpy = [trig[f"{p_name}.{c}"] for c in ("roll", "pitch", "yaw")]
+                T = T @ frame_transform(xyz, rpy)
+                T = T @ joint_motion(p_type, p_axis, multiplier * q_eff[master] + offset)
             xyz = [P[f"{name}.{c}"] for c in "xyz"]
             origin = T @ frame_transform(
                 xyz, [trig[f"{name}.{c}"] for c in ("roll", "pitch", "yaw")]

@@ -93,6 +93,8 @@ class Structure:
         Error terms on the joint angles, their values zeroed (`casecal.model.terms`).
     gravity : (float, float, float)
         Gravity's direction in the base frame (for gravity terms).
+    passive : tuple
+        URDF only: per joint, the mimic joints walked before it (`PassiveJoint.shape`).
     """
 
     convention: str
@@ -103,6 +105,7 @@ class Structure:
     axes: tuple[tuple[float, float, float], ...] = ()
     terms: tuple = ()
     gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    passive: tuple = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -110,7 +113,9 @@ class Structure:
         parameters of the error terms (`casecal.model.terms`)."""
         extra = tuple(n for t in self.terms for n in t.parameters)
         if self.convention == "urdf":
-            names = urdf_parameter_names(self.joint_names, self.joint_types, self.n_points)
+            names = urdf_parameter_names(
+                self.joint_names, self.joint_types, self.n_points, self.passive
+            )
         else:
             names = parameter_names(len(self.joint_types), self.beta_joints, self.n_points)
         return names + extra

@@ -72,15 +72,19 @@ URDF_ORIGIN = ("x", "y", "z", "roll", "pitch", "yaw")
 
 
 def urdf_parameter_names(
-    joint_names: Sequence[str], joint_types: str, n_points: int = 0
+    joint_names: Sequence[str], joint_types: str, n_points: int = 0, passive=()
 ) -> tuple[str, ...]:
     """Names of the full parameter vector of a URDF chain, in canonical order.
 
-    Per movable joint its origin ``{joint}.x`` … ``{joint}.yaw`` and, when revolute,
-    ``{joint}.offset``; then the base and tool frames and the points, as for DH.
+    Per movable joint the origins of the mimic joints walked before it (`passive`: per
+    joint, tuples whose first item is the mimic joint's name), then its own origin
+    ``{joint}.x`` … ``{joint}.yaw`` and, when revolute, ``{joint}.offset``; then the base
+    and tool frames and the points, as for DH.
     """
     names: list[str] = []
-    for joint, kind in zip(joint_names, joint_types, strict=True):
+    passive = passive or ((),) * len(joint_names)
+    for joint, kind, before in zip(joint_names, joint_types, passive, strict=True):
+        names += [f"{p[0]}.{c}" for p in before for c in URDF_ORIGIN]
         names += [f"{joint}.{c}" for c in URDF_ORIGIN]
         if kind == "R":
             names.append(f"{joint}.offset")

@@ -180,6 +180,9 @@ class Robot:
                 n_points=len(self.points),
                 joint_names=tuple(j.name for j in self.joints),
                 axes=tuple(j.axis for j in self.joints),
+                passive=tuple(tuple(p.shape for p in j.passive) for j in self.joints)
+                if any(j.passive for j in self.joints)
+                else (),
                 **extra,
             )
         betas = tuple(i for i, j in enumerate(self.joints, start=1) if j.beta is not None)
@@ -202,6 +205,7 @@ class Robot:
         values: list[float] = []
         for j in self.joints:
             if self.convention == "urdf":
+                values += [v for p in j.passive for v in (*p.xyz, *p.rpy)]
                 values += [*j.xyz, *j.rpy] + ([j.offset] if j.type == "R" else [])
                 continue
             values += [j.theta, j.d, j.a, j.alpha]
@@ -272,29 +276,7 @@ class Robot:
             if not math.isfinite(value):
                 raise CalibrationError(f"parameter {name!r}: value {value} is not finite")
             p[name] = value
-        joints = []
-        for i, j in enumerate(self.joints, start=1):
-            if self.convention == "urdf":
-                joints.append(
-                    dataclasses.replace(
-                        j,
-                        xyz=tuple(p[f"{j.name}.{c}"] for c in "xyz"),
-                        rpy=tuple(p[f"{j.name}.{c}"] for c in ("roll", "pitch", "yaw")),
-                        offset=p[f"{j.name}.offset"] if j.type == "R" else 0.0,
-                    )
-                )
-                continue
-            beta = p[f"beta{i}"] if j.beta is not None else None
-            joints.append(
-                dataclasses.replace(
-                    j,
-                    theta=p[f"theta{i}"],
-                    d=p[f"d{i}"],
-                    a=p[f"a{i}"],
-                    alpha=p[f"alpha{i}"],
-                    beta=beta,
-                )
-            )
+        from .vector import joints_from
 
         def frame(prefix: str) -> Frame:
             v = [p[f"{prefix}_{axis}"] for axis in FRAME_AXES]
@@ -308,7 +290,7 @@ class Robot:
         )
         return dataclasses.replace(
             self,
-            joints=tuple(joints),
+            joints=joints_from(self, p),
             base=frame("base"),
             tool=frame("tool"),
             points=points,

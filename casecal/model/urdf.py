@@ -49,6 +49,30 @@ class UrdfJoint:
     rpy: tuple[float, float, float]
     offset: float = 0.0
     limits: tuple[float, float] | None = None
+    passive: tuple = ()
+
+
+@dataclass(frozen=True)
+class PassiveJoint:
+    """A mimic joint on the chain, walked just before the `UrdfJoint` that holds it.
+
+    Its variable is ``multiplier · q[master] + offset`` (master: 0-based index of an
+    actuated joint); its origin (xyz m, rpy rad) is six parameters ``{name}.x`` … ``.yaw``.
+    """
+
+    name: str
+    type: str
+    axis: tuple[float, float, float]
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    master: int
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+    @property
+    def shape(self) -> tuple:
+        """What the symbolic graph depends on."""
+        return (self.name, self.type, self.axis, self.master, self.multiplier, self.offset)
 
 
 def check_joints(robot: str, joints) -> None:
@@ -62,9 +86,13 @@ def check_joints(robot: str, joints) -> None:
             raise CalibrationError(f"robot {robot!r}, joint {j.name!r}: a non-finite number")
         if abs(np.linalg.norm(j.axis) - 1) > 1e-9:
             raise CalibrationError(f"robot {robot!r}, joint {j.name!r}: axis is not a unit vector")
-        if j.name in names:
-            raise CalibrationError(f"robot {robot!r}: joint {j.name!r} appears twice")
-        names.add(j.name)
+        for p in j.passive:
+            if not isinstance(p, PassiveJoint) or not 0 <= p.master < len(joints):
+                raise CalibrationError(f"robot {robot!r}: mimic joint {p.name!r} has no master")
+        for name in (j.name, *(p.name for p in j.passive)):
+            if name in names:
+                raise CalibrationError(f"robot {robot!r}: joint {name!r} appears twice")
+            names.add(name)
 
 
 def transform(xyz, rpy) -> np.ndarray:
@@ -105,7 +133,7 @@ class _Joint:
     rpy: tuple[float, float, float]
     axis: tuple[float, float, float]
     limits: tuple[float, float] | None
-    mimic: bool
+    mimic: tuple[str, float, float] | None  # (master joint, multiplier, offset)
 
 
 def _numbers(text: str | None, n: int, what: str, label: str) -> tuple[float, ...]:
@@ -155,8 +183,16 @@ def _read_joint(el: ET.Element, label: str) -> _Joint:
         rpy,
         tuple(float(v) for v in axis / max(np.linalg.norm(axis), 1e-300)),
         limits,
-        el.find("mimic") is not None,
+        _mimic(el.find("mimic"), where),
     )
+
+
+def _mimic(el: ET.Element | None, where: str) -> tuple[str, float, float] | None:
+    if el is None:
+        return None
+    multiplier = _numbers(el.get("multiplier", "1"), 1, "mimic multiplier", where)[0]
+    offset = _numbers(el.get("offset", "0"), 1, "mimic offset", where)[0]
+    return el.get("joint", ""), multiplier, offset
 
 
 def chain_path(joints: list[_Joint], base_link: str | None, tip_link: str | None, label: str):
@@ -234,8 +270,11 @@ def read_urdf(
     masses = _link_inertials(root, label)
     out, pending, bodies, since = [], np.eye(4), [], np.eye(4)
 
+    actuated = [j.name for j in path if j.kind in MOVABLE and not j.mimic]
+    passive: list[PassiveJoint] = []
+
     def carry(link: str) -> None:  # the link's mass, in the frame of the body it rides on
-        if bodies and link in masses:
+        if bodies and bodies[-1] is not None and link in masses:
             mass, com = masses[link]
             bodies[-1].append((mass, since[:3, :3] @ com + since[:3, 3]))
 
@@ -249,22 +288,29 @@ def read_urdf(
                 f"{label}, joint {j.name!r}: type {j.kind!r} is not supported in a serial "
                 "chain (revolute, continuous, prismatic, fixed)"
             )
-        if j.mimic:
-            raise CalibrationError(
-                f"{label}, joint {j.name!r}: mimic joints are not supported yet; end the "
-                "chain before it with tip_link="
-            )
         # the file's own numbers when no fixed joint folds in: a round trip through the
         # matrix would cost digits
         xyz, rpy = (j.xyz, j.rpy) if np.array_equal(pending, np.eye(4)) else split(pending @ j.T)
-        out.append(UrdfJoint(j.name, MOVABLE[j.kind], j.axis, xyz, rpy, 0.0, j.limits))
         pending, since = np.eye(4), np.eye(4)
+        if j.mimic:
+            passive.append(_passive(j, xyz, rpy, actuated, label))
+            bodies.append(None)  # what a mimic joint moves is left out of gravity torques
+            continue
+        out.append(
+            UrdfJoint(j.name, MOVABLE[j.kind], j.axis, xyz, rpy, 0.0, j.limits, tuple(passive))
+        )
+        passive = []
         bodies.append([])
         carry(j.child)
     if not out:
         raise CalibrationError(f"{label}: no movable joint between {base_link!r} and {tip_link!r}")
+    if passive:
+        raise CalibrationError(
+            f"{label}: mimic joint {passive[0].name!r} comes after the last actuated joint; "
+            "end the chain before it with tip_link="
+        )
     tool_xyz, tool_rpy = split(pending)
-    inertials = tuple(_combined(parts) for parts in bodies)
+    inertials = tuple(_combined(parts) for parts in bodies if parts is not None)
     return Robot(
         inertials=inertials if any(x is not None for x in inertials) else (),
         name=root.get("name") or Path(label).stem,
@@ -274,6 +320,18 @@ def read_urdf(
         full_name=f"{root.get('name') or ''} ({base_link} to {tip_link})".strip(),
         source=(label,),
         urdf=UrdfSource(text, base_link, tip_link),
+    )
+
+
+def _passive(j, xyz, rpy, actuated: list[str], label: str) -> PassiveJoint:
+    master, multiplier, offset = j.mimic
+    if master not in actuated:
+        raise CalibrationError(
+            f"{label}, joint {j.name!r}: it mimics {master!r}, which is not an actuated joint "
+            "of this chain"
+        )
+    return PassiveJoint(
+        j.name, MOVABLE[j.kind], j.axis, xyz, rpy, actuated.index(master), multiplier, offset
     )
 
 
@@ -356,60 +414,3 @@ def _expand_xacro(path: Path, packages: dict[str, str]) -> str:
             "finds with packages={name: folder}, or run 'xacro FILE > robot.urdf' in its "
             "workspace and load the .urdf"
         ) from None
-
-
-_ROW_KEYS = {"name", "type", "axis", "xyz", "rpy", "offset", "limits"}
-
-
-def joint_from_row(row: dict, where: str, length: float, angle: float, label: str, number):
-    """A `UrdfJoint` from one ``[[joints]]`` table of a robot file with convention "urdf"."""
-    unknown = sorted(set(row) - _ROW_KEYS)
-    if unknown:
-        raise CalibrationError(f"{label}: {where} has unknown key {unknown[0]!r}")
-    if not isinstance(row.get("name"), str) or row.get("type") not in ("R", "P"):
-        raise CalibrationError(f'{label}: {where} needs name = "..." and type = "R" or "P"')
-
-    def triple(key, scale, default=None):
-        value = row.get(key, default)
-        if not isinstance(value, list) or len(value) != 3:
-            raise CalibrationError(f"{label}: {where}.{key} must be [x, y, z]")
-        return tuple(number(v, label, f"{where}.{key}") * scale for v in value)
-
-    axis = np.array(triple("axis", 1.0))
-    if np.linalg.norm(axis) == 0:
-        raise CalibrationError(f"{label}: {where}.axis is zero")
-    limits = None
-    if "limits" in row:
-        lim = row["limits"]
-        if not isinstance(lim, list) or len(lim) != 2:
-            raise CalibrationError(f"{label}: {where}.limits must be [min, max]")
-        scale = length if row["type"] == "P" else angle
-        limits = tuple(number(v, label, f"{where}.limits") * scale for v in lim)
-    return UrdfJoint(
-        name=row["name"],
-        type=row["type"],
-        axis=tuple(float(v) for v in axis / np.linalg.norm(axis)),
-        xyz=triple("xyz", length, [0, 0, 0]),
-        rpy=triple("rpy", angle, [0, 0, 0]),
-        offset=number(row.get("offset", 0.0), label, f"{where}.offset") * angle,
-        limits=limits,
-    )
-
-
-def joint_to_lines(j: UrdfJoint, quote) -> list[str]:
-    """The lines of one ``[[joints]]`` table (m, rad) that `joint_from_row` reads back."""
-
-    def three(values):
-        return "[" + ", ".join(repr(float(v)) for v in values) + "]"
-
-    lines = [
-        f"name = {quote(j.name)}",
-        f"type = {quote(j.type)}",
-        f"axis = {three(j.axis)}",
-        f"xyz = {three(j.xyz)}",
-        f"rpy = {three(j.rpy)}",
-        f"offset = {j.offset!r}",
-    ]
-    if j.limits is not None:
-        lines.append(f"limits = [{j.limits[0]!r}, {j.limits[1]!r}]")
-    return lines

@@ -14,7 +14,7 @@ import re
 import numpy as np
 
 from ..errors import CalibrationError
-from .urdf import chain_path, parse, split, transform
+from .urdf import PassiveJoint, chain_path, parse, split, transform
 
 
 def _fmt(values) -> str:
@@ -57,6 +57,7 @@ def file_origins(robot) -> tuple[dict[str, np.ndarray], list]:
     _, joints = parse(source.text, "URDF")
     path, _, _ = chain_path(joints, source.base_link, source.tip_link, "URDF")
     movable = {j.name: j for j in robot.joints}
+    movable.update({m.name: m for j in robot.joints for m in j.passive})
     origins, pending, fixed_after = {}, np.eye(4), []
     for j in path:
         if j.name not in movable:
@@ -64,7 +65,9 @@ def file_origins(robot) -> tuple[dict[str, np.ndarray], list]:
             fixed_after.append(j)
             continue
         cj = movable[j.name]
-        T = transform(cj.xyz, cj.rpy) @ _rotation_about(cj.axis, cj.offset)
+        # a mimic joint's offset is its own (in <mimic>), not a calibrated zero offset
+        turn = 0.0 if isinstance(cj, PassiveJoint) else cj.offset
+        T = transform(cj.xyz, cj.rpy) @ _rotation_about(cj.axis, turn)
         origins[j.name] = np.linalg.inv(pending) @ T
         pending, fixed_after = np.eye(4), []
     return origins, fixed_after
@@ -144,16 +147,21 @@ def _dh_pieces(robot, i: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _chain_rows(robot):
-    """Per joint (name, kind letter, origin T, axis, limits), and the transform left over
-    after the last joint (to be followed by the tool frame)."""
+    """Per joint, mimic joints included, (name, kind letter, origin T, axis, limits, mimic),
+    and the transform left over after the last joint (to be followed by the tool frame)."""
     rows, post = [], np.eye(4)
     for i, j in enumerate(robot.joints):
         if robot.convention == "urdf":
+            for m in j.passive:
+                mimic = (robot.joints[m.master].name, m.multiplier, m.offset)
+                # a URDF needs limits on a prismatic joint; a mimic joint's follow its master
+                limits = None if m.type == "R" else (-10.0, 10.0)
+                rows.append((m.name, m.type, transform(m.xyz, m.rpy), m.axis, limits, mimic))
             T = transform(j.xyz, j.rpy) @ _rotation_about(j.axis, j.offset)
-            rows.append((j.name, j.type, T, j.axis, j.limits))
+            rows.append((j.name, j.type, T, j.axis, j.limits, None))
             continue
         pre, after = _dh_pieces(robot, i)
-        rows.append((f"joint{i + 1}", j.type, post @ pre, (0.0, 0.0, 1.0), j.limits))
+        rows.append((f"joint{i + 1}", j.type, post @ pre, (0.0, 0.0, 1.0), j.limits, None))
         post = after
     return rows, post
 
@@ -162,13 +170,13 @@ def new_urdf(robot) -> tuple[str, list[str]]:
     """A URDF of `robot`'s chain: base_link, one link per joint, tool0; a ``world`` link
     when the base frame is not the identity. DH joints turn (or slide) about their z axes."""
     rows, post = _chain_rows(robot)
-    links = ["base_link", *(f"link{i}" for i in range(1, robot.dof + 1)), "tool0"]
+    links = ["base_link", *(f"link{i}" for i in range(1, len(rows) + 1)), "tool0"]
     base = transform(robot.base.xyz, robot.base.rpy)
     world = not np.allclose(base, np.eye(4), rtol=0, atol=1e-15)
     lines = ['<?xml version="1.0"?>', f'<robot name="{robot.name}">']
     lines += [f'  <link name="{name}"/>' for name in (["world"] if world else []) + links]
 
-    def joint(name, kind, parent, child, T, axis=None, limits=None):
+    def joint(name, kind, parent, child, T, axis=None, limits=None, mimic=None):
         xyz, rpy = split(T)
         out = [
             f'  <joint name="{name}" type="{kind}">',
@@ -182,13 +190,17 @@ def new_urdf(robot) -> tuple[str, list[str]]:
             out.append(
                 f'    <limit lower="{limits[0]!r}" upper="{limits[1]!r}" effort="0" velocity="0"/>'
             )
+        if mimic is not None:
+            out.append(
+                f'    <mimic joint="{mimic[0]}" multiplier="{mimic[1]!r}" offset="{mimic[2]!r}"/>'
+            )
         return [*out, "  </joint>"]
 
     if world:
         lines += joint("world_to_base", "fixed", "world", "base_link", base)
-    for i, (name, letter, T, axis, limits) in enumerate(rows):
+    for i, (name, letter, T, axis, limits, mimic) in enumerate(rows):
         kind = "prismatic" if letter == "P" else ("revolute" if limits else "continuous")
-        lines += joint(name, kind, links[i], links[i + 1], T, axis, limits)
+        lines += joint(name, kind, links[i], links[i + 1], T, axis, limits, mimic)
     tool = post @ transform(robot.tool.xyz, robot.tool.rpy)
     lines += joint("tool", "fixed", links[-2], "tool0", tool)
     lines.append("</robot>")
