@@ -238,3 +238,54 @@ def test_a_term_written_by_the_user_is_recovered():
     assert held_out(cal, true) < SIGMA * np.sqrt(3)
     with pytest.raises(cc.CalibrationError, match="Python code, not data"):
         cc.save_robot(cal.robot, "never-written.toml")
+
+
+def test_a_payload_per_pose_bends_the_arm_and_comes_back(tmp_path):
+    robot = dataclasses.replace(heavy(), payload_com=(0.0, 0.0, 0.2), auto_beta=False)
+    nominal = robot.with_inputs(payload_kg=0.0).with_compliance([2, 3])
+    true = nominal.with_deviations({"c2": 1e-6, "c3": 1.5e-6, "base_x": 2.0, "a2": 3e-4})
+    payload = np.random.default_rng(3).choice([0.0, 60.0, 150.0], size=100)
+    q = np.column_stack([cc.poses.uniform(robot, 100, seed=1), payload])
+    meas = cc.simulate(true, q, noise=SIGMA, seed=2)
+    cc.write_csv(tmp_path / "m.csv", meas, nominal)
+    assert "payload_kg" in (tmp_path / "m.csv").read_text().splitlines()[0]
+    cal = cc.identify(nominal, cc.read_csv(tmp_path / "m.csv", nominal), "all")
+    assert cal.success, cal.message
+    assert cal.deviations["c3"] == pytest.approx(1.5e-6, rel=0.05)
+    # new poses carrying the full payload: the payload's own bending is predicted too
+    q_new = np.column_stack([cc.poses.uniform(robot, 200, seed=5), np.full(200, 150.0)])
+    err = cal.robot.measured_points(q_new) - true.measured_points(q_new)
+    assert np.sqrt(np.mean(np.sum(err**2, axis=-1))) < SIGMA * np.sqrt(3)
+    # without the payload column, the 150 kg would be missing: the torque differs
+    assert np.abs(true.measured_points(q_new) - true.measured_points(q_new[:, :6])).max() > 1e-4
+    cc.save_robot(cal.robot, tmp_path / "c.toml")
+    assert cc.load_robot(tmp_path / "c.toml").inputs == (("payload_kg", 0.0),)
+
+
+def test_a_link_that_grows_with_temperature():
+    """A user term on a link: a2 grows by k per kelvin from 20 °C, read from a per-pose
+    temperature input; its Jacobian matches central differences."""
+    import casadi as ca
+
+    from casecal.model.terms import ErrorTerm
+
+    def growth(ctx, term):
+        T = ca.SX.eye(4)
+        T[0, 3] = ctx.p("k_a2") * (ctx.inputs["temperature_c"] - 20.0)
+        return T
+
+    base = cc.load_robot("puma560").with_points(MARKER).with_inputs(temperature_c=20.0)
+    model = base.with_terms(ErrorTerm("a2 thermal growth v1", 2, ("k_a2",), growth, target="link"))
+    true = model.with_deviations({"k_a2": 1.2e-5, "a2": 2e-4})  # 12 µm per kelvin
+    temperature = np.random.default_rng(8).uniform(15, 35, 80)
+    q = np.column_stack([cc.poses.uniform(base, 80, seed=7), temperature])
+    cal = cc.identify(model, cc.simulate(true, q, noise=SIGMA, seed=9), "all")
+    assert cal.success, cal.message
+    assert abs(cal.deviations["k_a2"] - 1.2e-5) < 4 * cal.standard_errors["k_a2"]
+    J, _ = true.position_jacobian(q[:5], ["k_a2"])
+    h = 1e-8
+    fd = (
+        true.with_deviations({"k_a2": h}).position(q[:5])
+        - true.with_deviations({"k_a2": -h}).position(q[:5])
+    ) / (2 * h)
+    assert np.abs(fd - J[:, :, 0]).max() < 1e-6 * np.abs(J).max()

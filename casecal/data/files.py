@@ -51,6 +51,8 @@ def read_csv(path, robot: Robot) -> Measurements:
     df, label = read_table(path)
     columns = list(df.columns)
     q = read_joints(df, robot, label)
+    if robot.inputs:
+        q = np.column_stack([q, _inputs(df, robot, label)])
     y = _positions(df, columns, label)
     if not any(re.fullmatch(r"(p\d+_)?[xyz]_(mm|m|um)", c) for c in columns):
         _check_metres(y, robot, label)
@@ -67,6 +69,22 @@ def read_csv(path, robot: Robot) -> Measurements:
         row = int(np.argwhere(sigma < 0)[0][0])
         raise CalibrationError(f"{label}: row {row + 2}: sigma is negative; it must be >= 0")
     return Measurements(q=q, positions=y, sigma=sigma, orientations=orientations)
+
+
+def _inputs(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
+    """The robot's per-pose inputs (`Robot.inputs`), from columns of the same names; a
+    missing column takes the reference value, with a warning."""
+    out = np.empty((len(df), len(robot.inputs)))
+    for k, (name, reference) in enumerate(robot.inputs):
+        if name in df:
+            out[:, k] = _numbers(df, name, label)
+        else:
+            warnings.warn(
+                f"{label}: no column {name!r}; every pose takes its reference value {reference:g}",
+                stacklevel=3,
+            )
+            out[:, k] = reference
+    return out
 
 
 def _warn_outside_limits(q: np.ndarray, robot: Robot, label: str) -> None:
@@ -261,6 +279,9 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
             data[f"q{i}_deg"] = np.rad2deg(col)
         else:
             data[f"q{i}_mm"] = col * 1e3
+    if measurements.q.shape[1] > robot.dof:
+        for k, (name, _) in enumerate(robot.inputs):
+            data[name] = measurements.q[:, robot.dof + k]
     points = measurements.points
     if measurements.positions.ndim == 2:
         for k, axis in enumerate("xyz"):

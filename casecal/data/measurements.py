@@ -183,7 +183,7 @@ def simulate(true_robot: Robot, q, noise=0.0, seed=None, orientation_noise=None)
     """
     from ..design.poses import rng_from
 
-    q2, _ = check_joint_values(q, true_robot.dof)
+    q2, _ = check_joint_values(q, true_robot.dof, len(true_robot.inputs))
     sigma = broadcast_sigma(noise, q2.shape[0])
     rng = rng_from(seed)
     points = true_robot.measured_points(q2)  # (N, m, 3)

@@ -132,10 +132,11 @@ def identify(
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
     names = selection(robot, parameters)
-    if measurements.q.shape[1] != robot.dof:
+    if measurements.q.shape[1] not in (robot.dof, robot.n_inputs):
+        extra = f" and {len(robot.inputs)} inputs" if robot.inputs else ""
         raise CalibrationError(
             f"measurements have {measurements.q.shape[1]} joint values per pose but robot "
-            f"{robot.name!r} has {robot.dof} joints; use the robot the data came from"
+            f"{robot.name!r} has {robot.dof} joints{extra}; use the robot the data came from"
         )
     q, y = measurements.q, measurements.points  # y: (N, m, 3)
     robot, point_note = _with_points(robot, measurements.n_points)

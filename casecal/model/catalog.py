@@ -227,7 +227,7 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
         source=source,
         confidence=str(data.get("confidence", "")),
     )
-    return add_terms(robot, data, angle, label, _number)
+    return add_terms(robot, data, angle, label, _number, length)
 
 
 def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:
@@ -329,11 +329,12 @@ def robot_to_toml(robot: Robot) -> str:
             f"rpy = [{', '.join(repr(float(v)) for v in frame.rpy)}]",
         ]
     extra = terms_lines(robot)
-    if extra and not extra[0].startswith("gravity"):
-        return "\n".join(lines + extra) + "\n"
-    if extra:  # gravity is a top-level key: before the first table
-        lines.insert(lines.index('angle_unit = "rad"') + 1, extra.pop(0))
-    return "\n".join(lines + extra) + "\n"
+    top = 0  # top-level keys (gravity, inputs, payload_com) go before the first table
+    while top < len(extra) and extra[top]:
+        top += 1
+    at = lines.index('angle_unit = "rad"') + 1
+    lines[at:at] = extra[:top]
+    return "\n".join(lines + extra[top:]) + "\n"
 
 
 def _q(text: str) -> str:

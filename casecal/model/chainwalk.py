@@ -32,11 +32,13 @@ class Walk:
     bodies: list
 
 
-def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict) -> Walk:
-    """Walk `structure` from `base` with effective joint variables `q_eff` (list of SX)."""
+def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None) -> Walk:
+    """Walk `structure` from `base` with effective joint variables `q_eff` (list of SX);
+    `after[i]`, when given and not None, is applied after joint i's link."""
     from .kinematics import frame_transform, joint_motion, link_transform
 
     T, axes, points, bodies = base, [], [], []
+    after = after or [None] * len(q_eff)
     if structure.convention == "urdf":
         passive = structure.passive or ((),) * len(q_eff)
         for jt, name, axis, q, before in zip(
@@ -60,6 +62,7 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict) -> Walk:
             points.append(origin[:3, 3])
             angle = q + P[f"{name}.offset"] if jt == "R" else q
             T = origin @ joint_motion(jt, axis, angle)
+            T = T if after[len(bodies)] is None else T @ after[len(bodies)]
             bodies.append(T)
         return Walk(T, axes, points, bodies)
     for i, (jt, q) in enumerate(zip(structure.joint_types, q_eff, strict=True), start=1):
@@ -73,11 +76,11 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict) -> Walk:
             trig[f"alpha{i}"],
             trig.get(f"beta{i}"),
         )
-        after = T @ link
+        link_after = T @ link
         # standard DH turns link i about z of frame i-1; modified DH about z of frame i
-        on = T if structure.convention == "dh" else after
+        on = T if structure.convention == "dh" else link_after
         axes.append(on[:3, 2])
         points.append(on[:3, 3])
-        T = after
+        T = link_after if after[i - 1] is None else link_after @ after[i - 1]
         bodies.append(T)
     return Walk(T, axes, points, bodies)

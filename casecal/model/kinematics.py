@@ -95,6 +95,9 @@ class Structure:
         Gravity's direction in the base frame (for gravity terms).
     passive : tuple
         URDF only: per joint, the mimic joints walked before it (`PassiveJoint.shape`).
+    inputs : tuple of (str, float)
+        Per-pose inputs beyond the joints (a payload, a temperature) that error terms read,
+        with the reference value used where a pose gives none.
     """
 
     convention: str
@@ -106,6 +109,12 @@ class Structure:
     terms: tuple = ()
     gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
     passive: tuple = ()
+    inputs: tuple = ()
+
+    @property
+    def n_inputs(self) -> int:
+        """Per-pose inputs of the graph: the joint values, then the `inputs` (covariates)."""
+        return len(self.joint_types) + len(self.inputs)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -227,7 +236,7 @@ class Chain:
 
     def _build(self):
         structure, m = self.structure, len(self.angle_index)
-        q = ca.SX.sym("q", len(structure.joint_types))
+        q = ca.SX.sym("q", structure.n_inputs)
         p = ca.SX.sym("p", len(self.names))
         cos, sin = ca.SX.sym("cos", m), ca.SX.sym("sin", m)
         trig = {self.names[k]: (cos[t], sin[t]) for t, k in enumerate(self.angle_index)}
@@ -238,14 +247,21 @@ class Chain:
             return frame_transform(xyz, [trig[f"{prefix}_r{a}"] for a in "xyz"])
 
         base = frame("base")
-        q_eff = [q[i] for i in range(q.numel())]
+        dof = len(structure.joint_types)
+        q_eff = [q[i] for i in range(dof)]
         if structure.terms:
             from .terms import STANDARD_GRAVITY, joint_deltas
 
             rigid = walk(structure, base, q_eff, P, trig)
             gravity = base[:3, :3] @ ca.DM(structure.gravity) * STANDARD_GRAVITY
-            deltas = joint_deltas(structure.terms, rigid, q, P.__getitem__, gravity)
+            inputs = {name: q[dof + k] for k, (name, _) in enumerate(structure.inputs)}
+            tool = rigid.T @ frame("tool")
+            deltas, after = joint_deltas(
+                structure.terms, rigid, q[:dof], P.__getitem__, gravity, inputs, tool
+            )
             q_eff = [qi + d for qi, d in zip(q_eff, deltas, strict=True)]
+            T = walk(structure, base, q_eff, P, trig, after).T
+            return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
         T = walk(structure, base, q_eff, P, trig).T
         return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
         for i, jt in enumerate(structure.joint_types, start=1):
@@ -313,7 +329,8 @@ class Chain:
             return position
         if kind == "joint_jacobian":
             # ∂(position, orientation)/∂q, 6 × dof: the orientation rows are vee(∂R/∂q_i Rᵀ)
-            q, R = self.graph[0], T[:3, :3]
+            R = T[:3, :3]
+            q = self.graph[0][: len(self.structure.joint_types)]
             dR = ca.jacobian(ca.vec(R), q)
             rows = []
             for i in range(q.numel()):
@@ -364,6 +381,10 @@ class Chain:
         ndarray, shape (N, 4, 4), (N, 3), (N, 3, k) or (N, 6, k)
         """
         columns = tuple(columns)
+        if q.shape[1] == len(self.structure.joint_types) and self.structure.inputs:
+            # poses without the per-pose inputs take their reference values
+            reference = [value for _, value in self.structure.inputs]
+            q = np.hstack([q, np.broadcast_to(reference, (q.shape[0], len(reference)))])
         if q.shape[0] < COMPILE_MIN_POSES:
             hot = self._small_calls[kind] = self._small_calls.get(kind, 0) + 1
             if hot >= HOT_CALLS:
@@ -453,7 +474,7 @@ class _Evaluator:
             self._native = _native.kernel(
                 key,
                 lambda: self.function,
-                n_q=len(self.chain.structure.joint_types),
+                n_q=self.chain.structure.n_inputs,
                 n_p=n_p,
                 n_out=int(np.prod(self.shape)),
             )

@@ -94,6 +94,12 @@ class Robot:
         frame), or None; empty when unknown. Gravity terms need them.
     gravity : (float, float, float)
         Gravity's direction in the base frame; (0, 0, -1) for a floor mount.
+    inputs : tuple of (str, float)
+        Per-pose inputs beyond the joints that error terms read (``payload_kg``, a
+        temperature), each with the reference value a pose without it takes. Joint
+        arrays may then carry them as extra columns after the joints (`with_inputs`).
+    payload_com : (float, float, float)
+        The payload's centre of mass in the tool frame, m (with a ``payload_kg`` input).
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -113,6 +119,8 @@ class Robot:
     terms: tuple = ()
     inertials: tuple = ()
     gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    inputs: tuple = ()
+    payload_com: tuple[float, float, float] = (0.0, 0.0, 0.0)
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
@@ -164,6 +172,21 @@ class Robot:
         return len(self.joints)
 
     @property
+    def n_inputs(self) -> int:
+        """Columns of a pose: the joints, then the per-pose `inputs`."""
+        return self.dof + len(self.inputs)
+
+    def with_inputs(self, **references: float) -> Robot:
+        """A new Robot that reads per-pose inputs (e.g. ``payload_kg=0.0``), given after
+        the joints in joint arrays (the reference value where a pose gives none)."""
+        known = dict(self.inputs)
+        for name, value in references.items():
+            if not name.isidentifier() or name.startswith("q"):
+                raise CalibrationError(f"input name {name!r}: use a word like temperature_c")
+            known[name] = float(value)
+        return dataclasses.replace(self, inputs=tuple(known.items()), auto_beta=False)
+
+    @property
     def joint_types(self) -> str:
         """One letter per joint, e.g. ``"RRPR"``."""
         return "".join(j.type for j in self.joints)
@@ -173,6 +196,8 @@ class Robot:
         """What the CasADi graph depends on (everything but the numbers)."""
         shapes = tuple(dataclasses.replace(t, values=()) for t in self.terms)
         extra = {"terms": shapes, "gravity": tuple(self.gravity)} if self.terms else {}
+        if self.inputs:
+            extra["inputs"] = tuple(self.inputs)
         if self.convention == "urdf":
             return kinematics.Structure(
                 "urdf",
@@ -374,7 +399,7 @@ class Robot:
         Shape (N, m, 3) for q (N, dof), (m, 3) for one pose; with no `points` the tool
         origin is the one point (m = 1).
         """
-        q2, single = check_joint_values(q, self.dof)
+        q2, single = check_joint_values(q, self.dof, len(self.inputs))
         ch = kinematics.chain(self.structure)
         out = ch.evaluate("points", q2, self.vector()).reshape(q2.shape[0], -1, 3)
         return out[0] if single else out
@@ -416,7 +441,7 @@ class Robot:
         return self._evaluate("pose_jacobian", q, names), names
 
     def _evaluate(self, kind: str, q, names: Sequence[str] = ()) -> np.ndarray:
-        q2, single = check_joint_values(q, self.dof)
+        q2, single = check_joint_values(q, self.dof, len(self.inputs))
         ch = kinematics.chain(self.structure)
         out = ch.evaluate(kind, q2, self.vector(), ch.columns(names) if names else ())
         return out[0] if single else out
@@ -432,12 +457,14 @@ def _points(name: str, points) -> tuple[tuple[float, float, float], ...]:
     return points
 
 
-def check_joint_values(q, dof: int) -> tuple[np.ndarray, bool]:
+def check_joint_values(q, dof: int, inputs: int = 0) -> tuple[np.ndarray, bool]:
     """Validate joint values and return them as a C-contiguous float64 (N, dof) array.
+
+    With `inputs` > 0 the robot reads per-pose inputs: (N, dof + inputs) is accepted too.
 
     Returns
     -------
-    q : ndarray, shape (N, dof)
+    q : ndarray, shape (N, dof) or (N, dof + inputs)
     single : bool
         True when the input was one pose of shape (dof,).
     """
@@ -447,7 +474,7 @@ def check_joint_values(q, dof: int) -> tuple[np.ndarray, bool]:
         raise CalibrationError(f"joint values are not numbers: {exc}") from None
     single = arr.ndim == 1
     arr = np.atleast_2d(arr)
-    if arr.ndim != 2 or arr.shape[1] != dof or arr.shape[0] == 0 or dof == 0:
+    if arr.ndim != 2 or arr.shape[1] not in (dof, dof + inputs) or arr.shape[0] == 0 or dof == 0:
         raise CalibrationError(
             f"joint values have shape {np.shape(q)}; give shape ({dof},) for one pose or "
             f"(N, {dof}) for N >= 1 poses of a robot with {dof} joints"

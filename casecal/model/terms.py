@@ -46,6 +46,10 @@ class TermContext:
         the pose of the body it moves (see `casecal.model.chainwalk.Walk`).
     gravity : SX, shape (3,)
         Gravity's acceleration in the world frame, m/s².
+    inputs : dict of str to SX
+        The robot's per-pose inputs (`Robot.inputs`), e.g. ``inputs["temperature_c"]``.
+    tool : SX, 4 × 4
+        World pose of the tool frame on the rigid chain.
     """
 
     q: ca.SX
@@ -54,6 +58,8 @@ class TermContext:
     points: list
     bodies: list
     gravity: ca.SX
+    inputs: dict = field(default_factory=dict)
+    tool: ca.SX | None = None
 
 
 @dataclass(frozen=True)
@@ -68,11 +74,14 @@ class ErrorTerm:
     parameters : tuple of str
         New parameter names, unique on the robot.
     build : callable(TermContext, ErrorTerm) -> SX
-        The term's value, rad.
+        With `target` "angle": the term's value, rad, added to the joint's angle. With
+        "link": a 4 × 4 transform (SX) applied after the joint's link, in its frame (a
+        length that grows with temperature: ``Trans(k·ΔT, 0, 0)``).
     values : tuple of float
         The parameters' current values, SI (zeros by default).
     data : tuple
         Numbers the function reads (hashable), e.g. masses.
+    target : {"angle", "link"}
     """
 
     kind: str
@@ -81,6 +90,7 @@ class ErrorTerm:
     build: Callable = field(compare=False, repr=False)
     values: tuple[float, ...] = ()
     data: tuple = ()
+    target: str = "angle"
 
     def __post_init__(self):
         object.__setattr__(self, "parameters", tuple(self.parameters))
@@ -91,20 +101,36 @@ class ErrorTerm:
                 "parameter"
             )
         object.__setattr__(self, "values", values)
+        if self.target not in ("angle", "link"):
+            raise CalibrationError(f"error term {self.kind!r}: target must be 'angle' or 'link'")
 
     @property
     def shape(self) -> tuple:
         """What the symbolic graph depends on: everything but the values."""
-        return (self.kind, self.joint, self.parameters, self.data)
+        return (self.kind, self.joint, self.parameters, self.data, self.target)
 
 
-def joint_deltas(terms, walk, q, p, gravity) -> list:
-    """Δ_i of every joint (SX, 0 where no term acts)."""
-    ctx = TermContext(q, p, walk.axes, walk.points, walk.bodies, gravity)
+def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None) -> tuple[list, list]:
+    """Per joint, Δ_i (SX, 0 where no term acts) and the transform after its link (SX
+    4 × 4, or None)."""
+    ctx = TermContext(q, p, walk.axes, walk.points, walk.bodies, gravity, inputs or {}, tool)
     deltas = [ca.SX(0) for _ in range(q.numel())]
+    after = [None] * q.numel()
     for term in terms:
-        deltas[term.joint - 1] = deltas[term.joint - 1] + term.build(ctx, term)
-    return deltas
+        i = term.joint - 1
+        value = term.build(ctx, term)
+        if term.target == "angle":
+            if value.shape != (1, 1):
+                raise CalibrationError(
+                    f"error term {term.kind!r}: an angle term returns a scalar, not "
+                    f"{value.shape[0]} × {value.shape[1]}"
+                )
+            deltas[i] = deltas[i] + value
+        else:
+            if value.shape != (4, 4):
+                raise CalibrationError(f"error term {term.kind!r}: a link term returns a 4 × 4")
+            after[i] = value if after[i] is None else after[i] @ value
+    return deltas, after
 
 
 # --- built-in terms -----------------------------------------------------------------
@@ -130,13 +156,27 @@ def gravity_torque(ctx: TermContext, joint: int, inertials) -> ca.SX:
 
 def _compliance(ctx: TermContext, term: ErrorTerm) -> ca.SX:
     (name,) = term.parameters
-    return ctx.p(name) * gravity_torque(ctx, term.joint, term.data)
+    *inertials, payload_com = term.data
+    torque = gravity_torque(ctx, term.joint, inertials)
+    if PAYLOAD in ctx.inputs and ctx.tool is not None:
+        # the payload's mass (kg, per pose) at its centre of mass in the tool frame
+        i = term.joint - 1
+        centre = ctx.tool[:3, :3] @ ca.DM(payload_com) + ctx.tool[:3, 3]
+        weight = ctx.inputs[PAYLOAD] * ctx.gravity
+        torque = torque + ca.dot(ca.cross(centre - ctx.points[i], weight), ctx.axes[i])
+    return ctx.p(name) * torque
 
 
-def compliance(joint: int, inertials, value: float = 0.0) -> ErrorTerm:
+PAYLOAD = "payload_kg"
+"""The per-pose input (`Robot.inputs`) that compliance reads as the payload's mass, kg."""
+
+
+def compliance(joint: int, inertials, value: float = 0.0, payload_com=(0.0, 0.0, 0.0)) -> ErrorTerm:
     """Joint `joint`'s compliance ``c{joint}`` (rad/(N·m)) under the gravity torque of the
-    bodies beyond it (`inertials`: per joint (mass, com) or None)."""
+    bodies beyond it (`inertials`: per joint (mass, com) or None) and of a payload
+    (``payload_kg`` among the robot's inputs, at `payload_com` in the tool frame, m)."""
     data = tuple(None if x is None else (float(x[0]), tuple(map(float, x[1]))) for x in inertials)
+    data += (tuple(float(v) for v in payload_com),)
     return ErrorTerm("compliance", joint, (f"c{joint}",), _compliance, (value,), data)
 
 
@@ -190,7 +230,7 @@ def check_terms(robot) -> None:
     for t in robot.terms:
         if not isinstance(t, ErrorTerm) or not 1 <= t.joint <= n:
             raise CalibrationError(f"robot {robot.name!r}: an error term on a joint it lacks")
-        if robot.joints[t.joint - 1].type != "R":
+        if t.target == "angle" and robot.joints[t.joint - 1].type != "R":
             raise CalibrationError(
                 f"robot {robot.name!r}: error term {t.kind!r} on prismatic joint {t.joint}; "
                 "terms act on revolute joints"
@@ -216,7 +256,12 @@ def compliance_terms(robot, joints=None) -> list[ErrorTerm]:
     bad = [j for j in chosen if j not in candidates]
     if bad:
         raise CalibrationError(f"robot {robot.name!r}: joint {bad[0]} is not a revolute joint")
-    terms = [compliance(j, robot.inertials) if known else lumped_compliance(j, n) for j in chosen]
+    terms = [
+        compliance(j, robot.inertials, payload_com=robot.payload_com)
+        if known
+        else lumped_compliance(j, n)
+        for j in chosen
+    ]
     if joints is not None:
         return terms
     probe = robot.with_terms(*terms)

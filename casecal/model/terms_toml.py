@@ -2,7 +2,9 @@
 
 Per ``[[joints]]`` row, optionally ``mass`` (kg) and ``com`` (the centre of mass of the
 body the joint moves, in its frame, length unit); at the top level ``gravity`` (a
-direction in the base frame, default ``[0, 0, -1]``); and the tables::
+direction in the base frame, default ``[0, 0, -1]``), ``inputs`` (per-pose inputs with
+their reference values, e.g. ``inputs = {payload_kg = 0.0}``), ``payload_com`` (length
+unit, tool frame); and the tables::
 
     [compliance]          # c{i} with masses, lumped g{i}_{k}* without; values in SI
     joints = [2, 3]
@@ -23,7 +25,7 @@ import numpy as np
 from ..errors import CalibrationError
 from .terms import compliance_terms, harmonics
 
-TOP_KEYS = {"gravity", "compliance", "harmonics"}
+TOP_KEYS = {"gravity", "compliance", "harmonics", "inputs", "payload_com"}
 ROW_KEYS = {"mass", "com"}
 
 
@@ -48,7 +50,7 @@ def split_rows(rows: list[dict], length: float, label: str, number) -> tuple[lis
     return plain, (tuple(inertials) if any(x is not None for x in inertials) else ())
 
 
-def add_terms(robot, data: dict, angle: float, label: str, number):
+def add_terms(robot, data: dict, angle: float, label: str, number, length: float = 1.0):
     """`robot` with the gravity, compliance and harmonics of the file `data`."""
     import dataclasses
 
@@ -60,6 +62,17 @@ def add_terms(robot, data: dict, angle: float, label: str, number):
         if not np.linalg.norm(g) > 0:
             raise CalibrationError(f"{label}: gravity must not be zero")
         robot = dataclasses.replace(robot, gravity=tuple(g / np.linalg.norm(g)), auto_beta=False)
+    if "inputs" in data:
+        table = data["inputs"]
+        if not isinstance(table, dict):
+            raise CalibrationError(f"{label}: inputs must be a table, e.g. {{payload_kg = 0.0}}")
+        robot = robot.with_inputs(**{k: number(v, label, f"inputs.{k}") for k, v in table.items()})
+    if "payload_com" in data:
+        com = data["payload_com"]
+        if not isinstance(com, list) or len(com) != 3:
+            raise CalibrationError(f"{label}: payload_com must be [x, y, z]")
+        xyz = tuple(number(v, label, "payload_com") * length for v in com)
+        robot = dataclasses.replace(robot, payload_com=xyz, auto_beta=False)
     values = {}
     terms = []
     if "compliance" in data:
@@ -101,6 +114,11 @@ def terms_lines(robot) -> list[str]:
     lines = []
     if tuple(robot.gravity) != (0.0, 0.0, -1.0):
         lines.append("gravity = [" + ", ".join(repr(float(v)) for v in robot.gravity) + "]")
+    if robot.inputs:
+        pairs = ", ".join(f"{name} = {float(v)!r}" for name, v in robot.inputs)
+        lines.append(f"inputs = {{{pairs}}}")
+    if tuple(robot.payload_com) != (0.0, 0.0, 0.0):
+        lines.append("payload_com = [" + ", ".join(repr(float(v)) for v in robot.payload_com) + "]")
     by_kind: dict[str, list] = {}
     for t in robot.terms:
         by_kind.setdefault(t.kind, []).append(t)
