@@ -13,6 +13,7 @@ import os
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -24,7 +25,7 @@ from .errors import CalibrationError
 from .identification.analysis import observability
 from .identification.fit import DEFAULT_METHOD, METHODS, identify
 from .identification.validation import split, validate
-from .model.catalog import load_deviations, load_robot, robots
+from .model.catalog import load_deviations, load_robot, nominal_of, robots
 from .model.parameters import unit
 
 _LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
@@ -210,8 +211,11 @@ def _robot_text(args: argparse.Namespace, robot) -> str:
     format cannot hold is said on standard error."""
     from .model.save import robot_text
 
+    origin = args.robot
+    if Path(origin).is_file():  # a path relative to the output's folder, as loading reads it
+        origin = os.path.relpath(Path(origin).resolve(), Path(args.output).resolve().parent)
     text, notes = robot_text(
-        dataclasses.replace(robot, calibrated_from=args.robot, auto_beta=False), args.output
+        dataclasses.replace(robot, calibrated_from=origin, auto_beta=False), args.output
     )
     for note in notes:
         print(f"note: {args.output}: {note}", file=sys.stderr)
@@ -295,7 +299,7 @@ def _cmd_validate(args: argparse.Namespace) -> None:
         raise CalibrationError(
             f"{args.calibrated} does not say which robot it was calibrated from; give --nominal"
         )
-    nominal = robot_for(args, nominal_name)
+    nominal = robot_for(args, nominal_name) if args.nominal else nominal_of(calibrated)
     if (
         nominal.structure.names[: len(nominal.parameter_names)]
         != calibrated.parameter_names[: len(nominal.parameter_names)]
@@ -535,7 +539,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     params_help = (
         "parameters: names, families or 'all', comma-separated, e.g. "
-        "'theta*,a*,d*' (default: the paper's theta, a, d; 'a*' never means alpha)"
+        "'theta*,a*,d*' or '*.offset' (default: the paper's theta, a, d, a URDF robot's "
+        "joint origins, and any error terms; 'a*' never means alpha)"
     )
     p = command(
         "simulate",

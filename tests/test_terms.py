@@ -289,3 +289,61 @@ def test_a_link_that_grows_with_temperature():
         - true.with_deviations({"k_a2": -h}).position(q[:5])
     ) / (2 * h)
     assert np.abs(fd - J[:, :, 0]).max() < 1e-6 * np.abs(J).max()
+
+
+def test_an_edited_term_never_reuses_the_old_kernel():
+    """Two terms of the same kind and names whose functions differ give different robots
+    (in one process and in the compiled-kernel cache, which keys on the code)."""
+    from casecal.model.terms import ErrorTerm
+
+    def weak(ctx, term):
+        return ctx.p("k") * ctx.q[1]
+
+    def strong(ctx, term):
+        return 100 * ctx.p("k") * ctx.q[1]
+
+    robot = cc.load_robot("puma560")
+    a = robot.with_terms(ErrorTerm("coupling", 3, ("k",), weak)).with_parameters({"k": 1e-3})
+    b = robot.with_terms(ErrorTerm("coupling", 3, ("k",), strong)).with_parameters({"k": 1e-3})
+    assert a.structure != b.structure
+    q = cc.poses.uniform(robot, 300, seed=1)  # enough poses for the compiled kernel
+    assert np.abs(a.position(q) - b.position(q)).max() > 1e-3
+
+
+def test_terms_cannot_shadow_the_robots_own_parameters():
+    from casecal.model.terms import ErrorTerm
+
+    with pytest.raises(cc.CalibrationError, match="already has"):
+        cc.load_robot("puma560").with_terms(ErrorTerm("x", 2, ("a2",), lambda ctx, t: ctx.p("a2")))
+    bad = cc.load_robot("puma560").with_terms(
+        ErrorTerm("vector", 2, ("k",), lambda ctx, t: ctx.p("k") * ctx.q[:3])
+    )
+    with pytest.raises(cc.CalibrationError, match="scalar"):
+        bad.position(np.zeros(6))
+    unknown = cc.load_robot("puma560").with_terms(
+        ErrorTerm("typo", 2, ("k",), lambda ctx, t: ctx.p("kk"))
+    )
+    with pytest.raises(cc.CalibrationError, match="neither its own nor the robot's"):
+        unknown.position(np.zeros(6))
+
+
+def test_masses_replaced_after_with_compliance_are_the_ones_used(tmp_path):
+    compliant = heavy().with_compliance([2, 3]).with_parameters({"c2": 1e-6})
+    doubled = tuple((2 * m, com) for m, com in INERTIALS)
+    heavier = dataclasses.replace(compliant, inertials=doubled, auto_beta=False)
+    q = cc.poses.uniform(heavy(), 10, seed=1)
+    rigid = heavy().measured_points(q)
+    bend = np.abs(compliant.measured_points(q) - rigid).max()
+    # twice the torque, twice the bend (to first order: the bend is 8 mm)
+    assert np.abs(heavier.measured_points(q) - rigid).max() == pytest.approx(2 * bend, rel=1e-3)
+    cc.save_robot(heavier, tmp_path / "h.toml")
+    assert (
+        np.abs(
+            cc.load_robot(tmp_path / "h.toml").measured_points(q) - heavier.measured_points(q)
+        ).max()
+        == 0
+    )
+    lumped = cc.load_robot("kr15_2").with_compliance([2])  # no masses: lumped terms
+    with_masses = dataclasses.replace(lumped, inertials=INERTIALS, auto_beta=False)
+    cc.save_robot(with_masses, tmp_path / "l.toml")
+    assert cc.load_robot(tmp_path / "l.toml").parameter_names == with_masses.parameter_names

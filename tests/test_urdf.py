@@ -249,3 +249,93 @@ def test_a_mimic_joint_follows_its_master(tmp_path):
     q_new = cc.poses.uniform(robot, 200, seed=3)
     err = cal.robot.measured_points(q_new) - true.measured_points(q_new)
     assert np.sqrt(np.mean(np.sum(err**2, axis=-1))) < 2e-5 * np.sqrt(3)
+
+
+TWO = """<robot name="two"{ns}>
+  <link name="a"/><link name="b"/><link name="c"/><link name="tip"/>
+  {before}
+  <joint name="j1" type="revolute"><parent link="a"/><child link="b"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="{kind}"><parent link="b"/><child link="c"/>
+    {comment}<origin xyz="0.4
+       0 0.1" rpy="0 0.2 0"/><axis xyz="{axis}"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="t" type="fixed"><parent link="c"/><child link="tip"/><origin xyz="0.2 0 0"/></joint>
+</robot>"""
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        {
+            "before": '<transmission name="t2"><joint name="j2"><hardwareInterface>x'
+            "</hardwareInterface></joint></transmission>"
+        },
+        {"comment": '<!-- was: <origin xyz="0 0 0"/> -->'},
+        {"before": '<!-- <joint name="j2" type="fixed"><origin xyz="9 9 9"/></joint> -->'},
+        {"ns": ' xmlns="http://www.ros.org"'},
+        {"kind": "prismatic", "axis": "0 0.6 0.8"},
+    ],
+    ids=["transmission-first", "comment-in-joint", "commented-joint", "xmlns", "prismatic"],
+)
+def test_only_the_real_joints_origin_changes(tmp_path, case):
+    fields = {"ns": "", "before": "", "comment": "", "kind": "revolute", "axis": "0 1 0"}
+    fields.update(case)
+    (tmp_path / "two.urdf").write_text(TWO.format(**fields))
+    robot = cc.load_robot(tmp_path / "two.urdf")
+    moved = robot.with_deviations({"j2.x": 2e-3, "j2.pitch": 3e-3, "j1.offset": 1e-3})
+    cc.save_robot(moved, tmp_path / "out.urdf")
+    q = cc.poses.uniform(robot, 20, seed=0)
+    back = cc.load_robot(tmp_path / "out.urdf")
+    assert np.abs(back.fk(q) - moved.fk(q)).max() < 1e-12
+    if fields["kind"] == "prismatic":  # the joint slides along its axis, turned by its rpy
+        shift = robot.position(np.array([0.0, 0.5])) - robot.position(np.array([0.0, 0.0]))
+        c, s = np.cos(0.2), np.sin(0.2)
+        axis = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]) @ [0.0, 0.6, 0.8]
+        np.testing.assert_allclose(shift, 0.5 * axis, atol=1e-15)
+
+
+def test_a_ur_urdf_with_a_calibrated_tool_says_the_file_cannot_hold_it(tmp_path):
+    (tmp_path / "k.yaml").write_text(
+        "kinematics:\n"
+        + "".join(
+            f"  {key}:\n" + "".join(f"    {f}: {v}\n" for f, v in zip(
+                ("x", "y", "z", "roll", "pitch", "yaw"), values, strict=True))
+            for key, values in zip(
+                ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3"),
+                [(0, 0, 0.16, 0, 0, 0), (0, 0, 0, 1.5708, 0, 0), (-0.42, 0, 0, 0, 0, 0),
+                 (-0.39, 0, 0.13, 0, 0, 0), (0, -0.1, 0, 1.5708, 0, 0),
+                 (0, 0.1, 0, 1.5708, 3.14159, 3.14159)],
+                strict=True,
+            )
+        )
+    )  # fmt: skip
+    cc.save_robot(cc.load_robot(tmp_path / "k.yaml"), tmp_path / "ur.urdf")
+    ur = cc.load_robot(tmp_path / "ur.urdf")
+    notes = cc.save_robot(ur.with_deviations({"tool_x": 5e-3}), tmp_path / "out.yaml")
+    assert any("tool frame is not written" in n for n in notes)
+    assert cc.save_robot(ur, tmp_path / "same.yaml") == []
+
+
+def test_identify_records_the_chain_and_the_nominal_beside_the_output(tmp_path, monkeypatch):
+    urdf = Path(__file__).parents[1] / "examples" / "kr16_2.urdf"
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "robots" / "kr16.urdf").write_text(urdf.read_text())
+    monkeypatch.chdir(tmp_path)
+    robot = cc.load_robot("robots/kr16.urdf", tip_link="link6")
+    meas = cc.simulate(
+        robot.with_deviations({"joint2.x": 5e-4}), cc.poses.uniform(robot, 40, seed=1)
+    )
+    cc.write_csv("m.csv", meas, robot)
+    argv = ["identify", "robots/kr16.urdf", "m.csv", "--tip-link", "link6", "-o", "out/cal.toml"]
+    assert main(argv) == 0
+    monkeypatch.chdir(tmp_path / "out")  # loaded from elsewhere, it still finds its nominal
+    cal = cc.load_robot("cal.toml")
+    assert cal.calibrated_chain == ("base_link", "link6")
+    from casecal.model.catalog import nominal_of
+
+    nominal = nominal_of(cal)
+    assert nominal.urdf.tip_link == "link6"
+    out = cc.compensate(cal, cc.poses.uniform(robot, 20, seed=2))
+    assert out.ok.mean() > 0.7 and out.position_error[out.ok].max() < 1e-9

@@ -480,7 +480,14 @@ def represent(J: np.ndarray, names, estimated, exclude=()) -> Representation:
 
 
 def selection(robot: Robot, parameters) -> list[str]:
-    """Resolve `parameters` for `robot` (default: the paper's θ, a, d)."""
+    """Resolve `parameters` for `robot`. Default: the paper's θ, a, d (a URDF robot: its
+    joint origins), and the parameters of its error terms, which it carries to be
+    estimated."""
     if parameters is None:
-        parameters = list(DEFAULT_PARAMETERS)
+        own = [n for t in robot.terms for n in t.parameters]
+        if robot.convention == "urdf":
+            dotted = [n for n in robot.parameter_names if "." in n]
+            return [n for n in robot.parameter_names if n in set(dotted) | set(own)]
+        chosen = set(select(robot.parameter_names, list(DEFAULT_PARAMETERS))) | set(own)
+        return [n for n in robot.parameter_names if n in chosen]
     return select(robot.parameter_names, parameters)

@@ -25,9 +25,10 @@ class ModelComparison:
         with its standard error over the folds), ``aic``, ``bic``, ``success`` (of the fit
         on all poses) and ``message``.
     best : str
-        The model with the fewest parameters whose cross-validated RMS is within one
-        standard error of the lowest (the one-standard-error rule): more parameters must
-        predict measurably better to be chosen.
+        Among the models whose fit on all poses passed its answer audit, the one with the
+        fewest parameters whose cross-validated RMS is within one standard error of the
+        lowest (the one-standard-error rule): more parameters must predict measurably
+        better to be chosen. Empty when no fit passed.
     """
 
     table: pd.DataFrame
@@ -35,6 +36,8 @@ class ModelComparison:
 
     def __str__(self) -> str:
         shown = self.table.drop(columns="message").to_string(index=False, float_format="%.4g")
+        if not self.best:
+            return f"{shown}\nno model's fit passed its answer audit: none is chosen"
         return f"{shown}\nchosen by cross-validation: {self.best}"
 
 
@@ -93,7 +96,13 @@ def compare_models(
         errors = []
         for k in range(folds):
             train, test = measurements.take(fold != k), measurements.take(fold == k)
-            part = identify(robot, train, parameters, **kwargs)
+            try:
+                part = identify(robot, train, parameters, **kwargs)
+            except CalibrationError as exc:
+                raise CalibrationError(
+                    f"model {name!r}, cross-validation fold {k + 1} of {folds} "
+                    f"({train.n_poses} of {n} poses): {exc}; use fewer folds or more poses"
+                ) from None
             miss = _points(part.robot, test) - test.positions.reshape(test.n_poses, -1)
             errors.append(np.mean(np.sum(miss.reshape(-1, 3) ** 2, axis=1)))
         per_fold = np.sqrt(errors)
@@ -112,7 +121,10 @@ def compare_models(
             }
         )
     table = pd.DataFrame(rows)
-    lowest = table.cv_rms_mm.idxmin()
-    near = table[table.cv_rms_mm <= table.cv_rms_mm[lowest] + table.cv_se_mm[lowest]]
+    passed = table[table.success]
+    if passed.empty:
+        return ModelComparison(table, "")  # no fit passed its audit: none is chosen
+    lowest = passed.cv_rms_mm.idxmin()
+    near = passed[passed.cv_rms_mm <= passed.cv_rms_mm[lowest] + passed.cv_se_mm[lowest]]
     best = str(near.sort_values(["parameters", "cv_rms_mm"]).model.iloc[0])
     return ModelComparison(table, best)

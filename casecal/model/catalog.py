@@ -29,7 +29,6 @@ Every mistake raises `CalibrationError` naming the file, the key and the fix.
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -44,6 +43,7 @@ _ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
 _TOP_KEYS = TOP_KEYS | {
     "points",
     "calibrated_from",
+    "calibrated_chain",
     "name",
     "convention",
     "length_unit",
@@ -214,10 +214,20 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     calibrated_from = data.get("calibrated_from", "")
     if not isinstance(calibrated_from, str):
         raise CalibrationError(f"{label}: calibrated_from must be a robot name or path string")
+    # a relative path is relative to this file's folder (identify writes it so)
+    beside = Path(label).parent / calibrated_from
+    if calibrated_from and not Path(calibrated_from).is_absolute() and beside.is_file():
+        calibrated_from = str(beside)
+    chain = data.get("calibrated_chain", [])
+    if not (
+        isinstance(chain, list) and len(chain) in (0, 2) and all(isinstance(c, str) for c in chain)
+    ):
+        raise CalibrationError(f"{label}: calibrated_chain must be [base_link, tip_link]")
     robot = Robot(
         name=name,
         inertials=inertials,
         calibrated_from=calibrated_from,
+        calibrated_chain=tuple(chain),
         points=points,
         joints=tuple(joints),
         convention=convention,
@@ -273,17 +283,11 @@ def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:
                 f"{label}: {name!r} is not a parameter of robot {robot.name!r}; "
                 f"its parameters are: {', '.join(robot.parameter_names)}"
             )
-        # compliance terms (rad/(N·m), rad/m) are SI whatever the file's units
+        # compliance terms (rad/(N·m), rad/m) are SI whatever the file's units; the rest,
+        # lumped gravity moments (rad) too, in the file's units as tables show them
         scale = {"m": length, "rad": angle}.get(unit(name), 1.0)
-        if unit(name) == "rad" and _is_lumped_moment(name):
-            scale = 1.0
         out[name] = _number(value, label, name) * scale
     return out
-
-
-def _is_lumped_moment(name: str) -> bool:
-    """A lumped gravity moment ``g{i}_{k}x`` is in rad but no angle: it stays SI."""
-    return re.match(r"^g\d+_\d+[xyz]$", name) is not None
 
 
 def robot_to_toml(robot: Robot) -> str:
@@ -298,6 +302,11 @@ def robot_to_toml(robot: Robot) -> str:
         lines.append(f"confidence = {_q(robot.confidence)}")
     if robot.calibrated_from:
         lines.append(f"calibrated_from = {_q(robot.calibrated_from)}")
+        chain = robot.calibrated_chain or (
+            (robot.urdf.base_link, robot.urdf.tip_link) if robot.urdf is not None else ()
+        )
+        if chain:
+            lines.append(f"calibrated_chain = [{_q(chain[0])}, {_q(chain[1])}]")
     for i, j in enumerate(robot.joints):
         if robot.convention == "urdf":
             from .urdf_toml import joint_to_lines
@@ -394,3 +403,21 @@ def _frame(data: dict, key: str, length: float, angle: float, label: str) -> Fra
             raise CalibrationError(f"{label}: [{key}].{sub} must be a list of three numbers")
         out[sub] = tuple(_number(x, label, f"[{key}].{sub}") * scale for x in v)
     return Frame(out["xyz"], out["rpy"])
+
+
+def nominal_of(robot: Robot) -> Robot:
+    """The nominal robot `robot` was calibrated from (its ``calibrated_from``, with the
+    URDF chain it used)."""
+    if not robot.calibrated_from:
+        raise CalibrationError(
+            f"robot {robot.name!r} does not say which nominal robot it was calibrated from "
+            "(no calibrated_from); give the nominal robot"
+        )
+    ends = dict(zip(("base_link", "tip_link"), robot.calibrated_chain, strict=False))
+    try:
+        return load_robot(robot.calibrated_from, **ends)
+    except CalibrationError as exc:
+        raise CalibrationError(
+            f"the nominal robot {robot.calibrated_from!r} (calibrated_from) cannot be loaded: "
+            f"{exc}; give it explicitly"
+        ) from None

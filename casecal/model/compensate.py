@@ -39,8 +39,9 @@ class Compensation:
     ok : ndarray of bool, shape (N,)
         Converged, not singular and within the joint limits.
     position_error, orientation_error : ndarray, shape (N,)
-        Where the calibrated robot's tool ends against the target, m and rad (0 for an arm
-        of fewer than six joints, where only the position is matched).
+        Where the calibrated robot's tool ends at the returned values, against the target,
+        m and rad (0 for an arm of fewer than six joints, where only the position is
+        matched); on a failed row, the error the uncorrected target leaves.
     reason : tuple of str
         Per row: "" when `ok`, else "singular", "no convergence", "out of reach (…)" or
         "outside the limits of joint k".
@@ -89,9 +90,9 @@ def compensate(
                 "compensate needs the nominal robot: pass nominal=, or use a robot file "
                 "written by identify (it records calibrated_from)"
             )
-        from .catalog import load_robot
+        from .catalog import nominal_of
 
-        nominal = load_robot(calibrated.calibrated_from)
+        nominal = nominal_of(calibrated)
     if nominal.dof != calibrated.dof:
         raise CalibrationError(
             f"the nominal robot has {nominal.dof} joints, the calibrated one {calibrated.dof}"
@@ -119,8 +120,10 @@ def compensate(
             break
     e = _errors(real, q, target)
     miss = np.max(np.abs(e[:, rows]), axis=1)
-    limits = real.limits
-    outside = (q < limits[:, 0] - 1e-12) | (q > limits[:, 1] + 1e-12)
+    # a joint without limits (continuous) turns freely: its default range is for sampling
+    lo = np.array([-np.inf if j.limits is None else j.limits[0] for j in real.joints])
+    hi = np.array([np.inf if j.limits is None else j.limits[1] for j in real.joints])
+    outside = (q[:, : real.dof] < lo - 1e-12) | (q[:, : real.dof] > hi + 1e-12)
     reason = []
     for k in range(len(q)):
         if not converged[k]:
@@ -132,8 +135,10 @@ def compensate(
         else:
             reason.append("")
     ok = np.array([r == "" for r in reason])
+    q = np.where(ok[:, None], q, q_t)
+    e = _errors(real, q, target)  # where the returned values put the tool
     return Compensation(
-        q=np.where(ok[:, None], q, q_t),
+        q=q,
         ok=ok,
         position_error=np.linalg.norm(e[:, :3], axis=1),
         orientation_error=np.linalg.norm(e[:, 3:], axis=1) if real.dof >= 6 else np.zeros(len(q)),

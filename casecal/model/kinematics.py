@@ -179,7 +179,7 @@ def joint_motion(joint_type: str, axis, q) -> ca.SX:
     or translation by `q` along it (P)."""
     k = np.asarray(axis, dtype=float)
     if joint_type == "P":
-        return _trans(*(k * q))
+        return _trans(*(float(v) * q if v else 0 for v in k))
     c, s = ca.cos(q), ca.sin(q)
     T = ca.SX.eye(4)
     skew = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
@@ -256,8 +256,16 @@ class Chain:
             gravity = base[:3, :3] @ ca.DM(structure.gravity) * STANDARD_GRAVITY
             inputs = {name: q[dof + k] for k, (name, _) in enumerate(structure.inputs)}
             tool = rigid.T @ frame("tool")
+            own = {n for t in structure.terms for n in t.parameters}
             deltas, after = joint_deltas(
-                structure.terms, rigid, q[:dof], P.__getitem__, gravity, inputs, tool
+                structure.terms,
+                rigid,
+                q[:dof],
+                P.__getitem__,
+                gravity,
+                inputs,
+                tool,
+                known=set(self.names) - own,
             )
             q_eff = [qi + d for qi, d in zip(q_eff, deltas, strict=True)]
             T = walk(structure, base, q_eff, P, trig, after).T

@@ -83,6 +83,9 @@ class Robot:
     points : tuple of (x, y, z)
         Measured points (reflectors) in the tool frame, m; empty: the tool frame's origin
         is what is measured. Each adds parameters ``point{k}_x/y/z``.
+    calibrated_from, calibrated_chain : str, tuple
+        The nominal robot a calibrated one came from (name or path), and for a URDF the
+        chain's (base link, tip link); `casecal.model.catalog.nominal_of` loads it.
     urdf : casecal.model.urdf.UrdfSource or None
         For a robot read from a URDF: the text and the chain's ends, so that saving it
         as URDF changes only the calibrated numbers.
@@ -115,6 +118,7 @@ class Robot:
     confidence: str = ""
     points: tuple[tuple[float, float, float], ...] = ()
     calibrated_from: str = ""
+    calibrated_chain: tuple = ()
     urdf: object = None
     terms: tuple = ()
     inertials: tuple = ()
@@ -124,9 +128,11 @@ class Robot:
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
-        from .terms import check_terms
+        from .terms import check_terms, refreshed
 
+        object.__setattr__(self, "terms", tuple(self.terms))
         check_terms(self)
+        object.__setattr__(self, "terms", refreshed(self))
         if self.convention not in ("dh", "mdh", "urdf"):
             raise CalibrationError(
                 f"robot {self.name!r}: convention {self.convention!r} is unknown; "

@@ -20,6 +20,9 @@ a new value whenever the function changes.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -91,9 +94,20 @@ class ErrorTerm:
     values: tuple[float, ...] = ()
     data: tuple = ()
     target: str = "angle"
+    code: str = ""
 
     def __post_init__(self):
+        if isinstance(self.parameters, str):  # ("k23") is a string, not a tuple of one
+            object.__setattr__(self, "parameters", (self.parameters,))
         object.__setattr__(self, "parameters", tuple(self.parameters))
+        if not isinstance(self.joint, numbers.Integral) or isinstance(self.joint, bool):
+            raise CalibrationError(f"error term {self.kind!r}: joint must be a joint number")
+        object.__setattr__(self, "joint", int(self.joint))
+        if not callable(self.build):
+            raise CalibrationError(f"error term {self.kind!r}: build must be a function")
+        # the function's own code keys the compiled kernels: an edited function never
+        # reuses a kernel built from its earlier version
+        object.__setattr__(self, "code", fingerprint(self.build))
         values = tuple(float(v) for v in self.values) or (0.0,) * len(self.parameters)
         if len(values) != len(self.parameters) or not all(np.isfinite(values)):
             raise CalibrationError(
@@ -107,18 +121,50 @@ class ErrorTerm:
     @property
     def shape(self) -> tuple:
         """What the symbolic graph depends on: everything but the values."""
-        return (self.kind, self.joint, self.parameters, self.data, self.target)
+        return (self.kind, self.joint, self.parameters, self.data, self.target, self.code)
 
 
-def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None) -> tuple[list, list]:
+def fingerprint(function) -> str:
+    """A hash of a function's code, constants, names, defaults and closure values: the
+    same across processes for the same source, different after an edit."""
+    code = getattr(function, "__code__", None)
+    if code is None:
+        return repr(function)
+    closure = [c.cell_contents for c in (function.__closure__ or ())]
+    text = repr((code.co_code, code.co_consts, code.co_names, function.__defaults__, closure))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=()) -> tuple:
     """Per joint, Δ_i (SX, 0 where no term acts) and the transform after its link (SX
-    4 × 4, or None)."""
-    ctx = TermContext(q, p, walk.axes, walk.points, walk.bodies, gravity, inputs or {}, tool)
+    4 × 4, or None); `known` are the robot's own parameter names."""
     deltas = [ca.SX(0) for _ in range(q.numel())]
     after = [None] * q.numel()
     for term in terms:
         i = term.joint - 1
-        value = term.build(ctx, term)
+
+        def symbol(name, term=term):
+            if name not in term.parameters and name not in known:
+                raise CalibrationError(
+                    f"error term {term.kind!r} asks for parameter {name!r}, which is neither "
+                    "its own nor the robot's"
+                )
+            return p(name)
+
+        ctx = TermContext(
+            q, symbol, walk.axes, walk.points, walk.bodies, gravity, inputs or {}, tool
+        )
+        try:
+            value = term.build(ctx, term)
+            value = ca.SX(value)
+        except CalibrationError:
+            raise
+        except Exception as exc:  # a user's function may fail in any way
+            raise CalibrationError(
+                f"error term {term.kind!r} on joint {term.joint}: its function failed "
+                f"({type(exc).__name__}: {' '.join(str(exc).split())[:200]}); it must return a "
+                "CasADi SX expression"
+            ) from None
         if term.target == "angle":
             if value.shape != (1, 1):
                 raise CalibrationError(
@@ -192,8 +238,9 @@ def _harmonics(ctx: TermContext, term: ErrorTerm) -> ca.SX:
 
 def harmonics(joint: int, order: int, values=()) -> ErrorTerm:
     """``Σ_k h{joint}_s{k} sin(k q) + h{joint}_c{k} cos(k q)``, k = 1 … `order` (rad)."""
-    if not isinstance(order, int) or order < 1:
+    if not isinstance(order, numbers.Integral) or isinstance(order, bool) or order < 1:
         raise CalibrationError(f"harmonics of joint {joint}: order must be an integer >= 1")
+    order = int(order)
     names = tuple(f"h{joint}_{t}{k}" for k in range(1, order + 1) for t in ("s", "c"))
     return ErrorTerm("harmonics", joint, names, _harmonics, tuple(values), (order,))
 
@@ -227,6 +274,9 @@ def check_terms(robot) -> None:
     """Raise CalibrationError unless `robot`'s terms, inertials and gravity fit it."""
     n = len(robot.joints)
     seen: set[str] = set()
+    geometric = set()
+    if robot.terms:
+        geometric = set(dataclasses.replace(robot, terms=(), auto_beta=False).parameter_names)
     for t in robot.terms:
         if not isinstance(t, ErrorTerm) or not 1 <= t.joint <= n:
             raise CalibrationError(f"robot {robot.name!r}: an error term on a joint it lacks")
@@ -235,9 +285,12 @@ def check_terms(robot) -> None:
                 f"robot {robot.name!r}: error term {t.kind!r} on prismatic joint {t.joint}; "
                 "terms act on revolute joints"
             )
-        clash = seen.intersection(t.parameters)
+        clash = seen.intersection(t.parameters) | geometric.intersection(t.parameters)
         if clash:
-            raise CalibrationError(f"robot {robot.name!r}: parameter {sorted(clash)[0]!r} twice")
+            raise CalibrationError(
+                f"robot {robot.name!r}: error term {t.kind!r} names parameter "
+                f"{sorted(clash)[0]!r}, which the robot already has; choose another name"
+            )
         seen.update(t.parameters)
     if robot.inertials and len(robot.inertials) != n:
         raise CalibrationError(f"robot {robot.name!r}: give one inertial (or None) per joint")
@@ -246,11 +299,30 @@ def check_terms(robot) -> None:
         raise CalibrationError(f"robot {robot.name!r}: gravity must be a unit vector (x, y, z)")
 
 
-def compliance_terms(robot, joints=None) -> list[ErrorTerm]:
+def refreshed(robot) -> tuple:
+    """`robot`'s terms with the compliance terms reading its current masses and payload
+    (a robot whose masses were replaced after `with_compliance` must not keep the old)."""
+    out = []
+    for t in robot.terms:
+        if t.kind == "compliance":
+            if not robot.inertials:
+                raise CalibrationError(
+                    f"robot {robot.name!r} has compliance terms but no masses; give its "
+                    "inertials, or use lumped terms (with_compliance on a robot without masses)"
+                )
+            fresh = compliance(t.joint, robot.inertials, payload_com=robot.payload_com)
+            t = dataclasses.replace(t, data=fresh.data)
+        out.append(t)
+    return tuple(out)
+
+
+def compliance_terms(robot, joints=None, lumped=None) -> list[ErrorTerm]:
     """Compliance terms of `robot` on `joints` (None: the revolute joints whose gravity
-    torque is not zero at every pose, judged on 64 poses within the limits)."""
+    torque is not zero at every pose, judged on 64 poses within the limits); lumped terms
+    when the robot has no masses (or `lumped` is True)."""
     n = len(robot.joints)
     known = bool(robot.inertials) and any(x is not None for x in robot.inertials)
+    known = known if lumped is None else not lumped
     candidates = [i for i in range(1, n + 1) if robot.joints[i - 1].type == "R"]
     chosen = candidates if joints is None else [int(j) for j in joints]
     bad = [j for j in chosen if j not in candidates]

@@ -78,9 +78,12 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
     if "compliance" in data:
         table = _table(data, "compliance", label)
         joints = table.pop("joints", None)
+        lumped = table.pop("lumped", None)
         if joints is not None and not (isinstance(joints, list) and joints):
             raise CalibrationError(f"{label}: compliance.joints must be a list of joints")
-        terms += compliance_terms(robot, joints)
+        if lumped is not None and not isinstance(lumped, bool):
+            raise CalibrationError(f"{label}: compliance.lumped must be true or false")
+        terms += compliance_terms(robot, joints, lumped)
         values.update({k: number(v, label, f"compliance.{k}") for k, v in table.items()})
     if "harmonics" in data:
         table = _table(data, "harmonics", label)
@@ -130,8 +133,14 @@ def terms_lines(robot) -> list[str]:
             "attach the term again with Robot.with_terms"
         )
     comp = by_kind.get("compliance", []) + by_kind.get("lumped_compliance", [])
+    if by_kind.get("compliance") and by_kind.get("lumped_compliance"):
+        raise CalibrationError(
+            f"robot {robot.name!r}: compliance with masses and lumped terms together cannot "
+            "be saved; keep one kind"
+        )
     if comp:
-        lines += ["", "[compliance]", f"joints = {[t.joint for t in comp]}"]
+        lumped = "true" if "lumped_compliance" in by_kind else "false"
+        lines += ["", "[compliance]", f"joints = {[t.joint for t in comp]}", f"lumped = {lumped}"]
         lines += [f"{n} = {v!r}" for t in comp for n, v in zip(t.parameters, t.values, strict=True)]
     if "harmonics" in by_kind:
         terms = by_kind["harmonics"]

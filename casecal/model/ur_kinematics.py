@@ -72,14 +72,25 @@ def _urdf_origins(robot) -> tuple[list[np.ndarray], list[str]]:
             f"robot {robot.name!r}: a UR kinematics file needs the joints {', '.join(JOINTS)}"
             f" (with one common prefix); this robot has {', '.join(names)}"
         )
+    notes = []
     if robot.urdf is not None:
-        found, _ = file_origins(robot)
+        found, fixed_after = file_origins(robot)
         origins = [found[n] for n in names]
+        # the file's own tool (its fixed joints after wrist_3): a calibrated tool that
+        # differs from it has no place in a kinematics file
+        nominal_tool = np.eye(4)
+        for j in fixed_after:
+            nominal_tool = nominal_tool @ j.T
+        if not np.allclose(transform(robot.tool.xyz, robot.tool.rpy), nominal_tool, atol=1e-12):
+            notes.append(
+                "the calibrated tool frame is not written: a UR kinematics file ends at "
+                "wrist_3_link (set the TCP on the controller, or save as .toml)"
+            )
     else:
         origins = [
             transform(j.xyz, j.rpy) @ _rotation_about(j.axis, j.offset) for j in robot.joints
         ]
-    notes = offset_note(robot, "a UR kinematics file")
+    notes += offset_note(robot, "a UR kinematics file")
     if not _is_identity(transform(robot.tool.xyz, robot.tool.rpy)) and robot.urdf is None:
         notes.append("the tool frame is not written: tool0 is wrist_3_link")
     return origins, notes

@@ -247,6 +247,9 @@ def parse(text: str, label: str) -> tuple[ET.Element, list[_Joint]]:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise CalibrationError(f"{label}: not valid XML ({exc})") from None
+    for el in root.iter():  # a default namespace (xmlns="...") names every tag {ns}tag
+        if isinstance(el.tag, str) and el.tag.startswith("{"):
+            el.tag = el.tag.split("}", 1)[1]
     if root.tag != "robot":
         raise CalibrationError(f"{label}: the root element is <{root.tag}>, not <robot>")
     return root, [

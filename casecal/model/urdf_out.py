@@ -10,6 +10,7 @@ base frame, measured points) is returned as notes for the caller to say.
 from __future__ import annotations
 
 import re
+from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
@@ -29,25 +30,38 @@ def _rotation_about(axis, angle: float) -> np.ndarray:
     return T
 
 
+def _masked(text: str) -> str:
+    """`text` with comments and CDATA blanked (same length): what the parser reads."""
+    return re.sub(
+        r"<!--.*?-->|<!\[CDATA\[.*?\]\]>", lambda m: " " * len(m.group(0)), text, flags=re.S
+    )
+
+
 def _set_origin(text: str, joint: str, xyz, rpy) -> str:
-    """`text` with the origin of `<joint name="joint">` set to `xyz`, `rpy`."""
-    start = re.search(r"<joint\b[^>]*\bname\s*=\s*([\"'])" + re.escape(joint) + r"\1[^>]*>", text)
+    """`text` with the origin of the kinematic ``<joint name="joint" type=...>`` (not a
+    transmission's joint, not one in a comment) set to `xyz`, `rpy`."""
+    seen = _masked(text)
+    names = "|".join(re.escape(n) for n in {joint, xml_escape(joint, {'"': "&quot;"})})
+    start = re.search(
+        r"<joint\b(?=[^>]*\btype\s*=)[^>]*\bname\s*=\s*([\"'])(?:" + names + r")\1[^>]*>", seen
+    )
     if start is None:
-        raise CalibrationError(f"internal error: joint {joint!r} not found in the URDF text")
-    end = text.find("</joint>", start.end())
-    body = text[start.end() : end]
-    origin = f'xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"'
-    found = re.search(r"<origin\b([^>]*?)(/?)>", body)
-    if found is None:
-        body = f"\n    <origin {origin}/>" + body
-    else:
-        attrs = re.sub(r"\s*\b(xyz|rpy)\s*=\s*([\"']).*?\2", "", found.group(1))
-        body = (
-            body[: found.start()]
-            + f"<origin {origin}{attrs}{found.group(2)}>"
-            + body[found.end() :]
+        raise CalibrationError(
+            f"joint {joint!r} is not found in the URDF text it came from; save as .toml instead"
         )
-    return text[: start.end()] + body + text[end:]
+    end = seen.find("</joint>", start.end())
+    origin = f'xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"'
+    found = re.search(r"<origin\b([^>]*?)(/?)>", seen[start.end() : end], flags=re.S)
+    if found is None:
+        return text[: start.end()] + f"\n    <origin {origin}/>" + text[start.end() :]
+    a, b = start.end() + found.start(1), start.end() + found.end(1)
+    attrs = re.sub(r"\s*\b(xyz|rpy)\s*=\s*([\"']).*?\2", "", text[a:b], flags=re.S)
+    head = start.end() + found.start()
+    return (
+        text[:head]
+        + f"<origin {origin}{attrs}{found.group(2)}>"
+        + text[start.end() + found.end() :]
+    )
 
 
 def file_origins(robot) -> tuple[dict[str, np.ndarray], list]:
