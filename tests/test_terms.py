@@ -347,3 +347,28 @@ def test_masses_replaced_after_with_compliance_are_the_ones_used(tmp_path):
     with_masses = dataclasses.replace(lumped, inertials=INERTIALS, auto_beta=False)
     cc.save_robot(with_masses, tmp_path / "l.toml")
     assert cc.load_robot(tmp_path / "l.toml").parameter_names == with_masses.parameter_names
+
+
+def test_loosely_seen_harmonics_are_not_kept_by_chance():
+    """Joint-6 harmonics with the reflector on the flange axis: 18 harmonic terms, each
+    barely seen; at the 99.9 % level per term one would pass by chance in about one fit of
+    twenty (this seed did, at 3.15 ± 0.86°). The level is shared among the candidates."""
+    nominal = (
+        heavy()
+        .with_points([[0.0, 0.0, 0.1]])
+        .with_compliance()
+        .with_joint_harmonics(1, 3)
+        .with_joint_harmonics(6, 3)
+    )
+    rng = np.random.default_rng(5)
+    truth = {n: rng.normal() * 1e-4 for n in nominal.parameter_names if n[0] == "h"}
+    truth.update({c: 1.5e-6 for c in ("c2", "c3", "c4", "c5")})
+    rigid = {
+        n: rng.normal() * 5e-4 for n in nominal.parameter_names if n[0] in "tad" and "_" not in n
+    }
+    true = nominal.with_deviations({**rigid, **truth, "base_x": 3.0, "base_rz": 2.0})
+    q = cc.poses.uniform(nominal, 40, seed=33)
+    cal = cc.identify(nominal, cc.simulate(true, q, noise=2e-5, seed=303), "all")
+    for name in cal.estimated:
+        if name.startswith("h6"):
+            assert abs(cal.deviations[name]) < np.radians(0.5), (name, cal.deviations[name])

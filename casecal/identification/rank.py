@@ -51,8 +51,9 @@ when its standard error exceeds its deviation; past this bound it exceeds any.""
 
 SIGNIFICANT = 3.3
 """An estimate this many standard errors from its start is seen by the data: the 99.9 %
-level (a t-statistic; the audit's χ² tests use the same level), so that of several
-loosely seen newcomers none is kept by chance."""
+level (a t-statistic; the audit's χ² tests use the same level), shared among the
+candidates (Bonferroni: 4.2 for 43), so that of several loosely seen newcomers none is
+kept by chance."""
 
 ALIAS = 20
 """An estimate beyond this many `PLAUSIBLE_DEVIATION` whose standard error is already
@@ -230,6 +231,11 @@ class _Judge:
         self.n_points = W.shape[0] / 3
         self.free = np.array([not n.startswith(UNPRUNED_PREFIXES) for n in candidates])
         self.plausible = np.array([PLAUSIBLE_DEVIATION[unit(n)] for n in candidates])
+        # the 99.9 % level shared among the candidates (Bonferroni): of 18 loosely seen
+        # harmonics, one 3.3 standard errors out happens by chance in one fit of 20
+        from scipy.special import ndtri
+
+        self.level = max(SIGNIFICANT, float(-ndtri(0.0005 / max(len(candidates), 1))))
         # without σ, residuals still hold what an unfitted newcomer may explain
         self.untried = np.array([not reduced.known and n not in established for n in candidates])
 
@@ -239,7 +245,7 @@ class _Judge:
         i = subset.index(k)
         se = np.sqrt(max(C[i, i], 0.0))
         est = self.offsets[k] + step[i]
-        return bool(abs(est) >= SIGNIFICANT * se and abs(est) <= ALIAS * self.plausible[k])
+        return bool(abs(est) >= self.level * se and abs(est) <= ALIAS * self.plausible[k])
 
     def hold(self, subset: list[int]) -> tuple[list[int], dict]:
         """`subset` minus what must be held, and why (by candidate name)."""
@@ -258,7 +264,7 @@ class _Judge:
             explained = np.sum((self.W[:, cols] @ Ca) ** 2, axis=0)
             spread = np.sqrt(explained / np.where(var > 0, var, np.inf) / self.n_points)
             too_wide = spread > self.e0
-            faint = np.abs(est[a]) < SIGNIFICANT * se
+            faint = np.abs(est[a]) < self.level * se
             faint |= np.abs(est[a]) > ALIAS * self.plausible[cols]  # an alias
             useless = (
                 (se > self.plausible[cols])
