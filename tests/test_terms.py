@@ -274,14 +274,20 @@ def test_a_link_that_grows_with_temperature():
         T[0, 3] = ctx.p("k_a2") * (ctx.inputs["temperature_c"] - 20.0)
         return T
 
+    from casecal.model.parameters import Unit
+
     base = cc.load_robot("puma560").with_points(MARKER).with_inputs(temperature_c=20.0)
-    model = base.with_terms(ErrorTerm("a2 thermal growth v1", 2, ("k_a2",), growth, target="link"))
+    per_kelvin = ("m/K", Unit("µm/K", 1e6, 1e-3, 1e-5, 1e-3))
+    term = ErrorTerm("a2 growth", 2, ("k_a2",), growth, target="link", units=(per_kelvin,))
+    model = base.with_terms(term)
     true = model.with_deviations({"k_a2": 1.2e-5, "a2": 2e-4})  # 12 µm per kelvin
     temperature = np.random.default_rng(8).uniform(15, 35, 80)
     q = np.column_stack([cc.poses.uniform(base, 80, seed=7), temperature])
     cal = cc.identify(model, cc.simulate(true, q, noise=SIGMA, seed=9), "all")
     assert cal.success, cal.message
     assert abs(cal.deviations["k_a2"] - 1.2e-5) < 4 * cal.standard_errors["k_a2"]
+    row = cal.table[cal.table.parameter == "k_a2"].iloc[0]
+    assert row.unit == "µm/K" and row.deviation == pytest.approx(12, abs=2)
     J, _ = true.position_jacobian(q[:5], ["k_a2"])
     h = 1e-8
     fd = (

@@ -427,9 +427,6 @@ class Representation:
         )
 
 
-PLAUSIBLE = {u: facts.generous for u, facts in UNITS.items()}
-"""A generous deviation (10 mm, 0.57°) by which to judge whether a term matters."""
-
 REPRESENTED = 0.05
 """A held parameter whose column the estimated ones reproduce to within this fraction is
 named in their combinations; beyond it the held parameter is its own, unestimated effect."""
@@ -474,7 +471,10 @@ def represent(J: np.ndarray, names, estimated, exclude=()) -> Representation:
             # a term carrying under a millionth of the held column is rounding, and one
             # through which a plausible deviation of the held parameter moves the estimate
             # by less than a micrometre (microradian) is no meaning a user could act on
-            if abs(c) * norms[k] > 1e-6 * norms[h] and abs(c) * PLAUSIBLE[unit(names[h])] > 1e-6:
+            if (
+                abs(c) * norms[k] > 1e-6 * norms[h]
+                and abs(c) * UNITS[unit(names[h])].generous > 1e-6
+            ):
                 terms[names[k]].append((names[h], float(c)))
     return Representation({k: tuple(v) for k, v in terms.items()}, misfit)
 

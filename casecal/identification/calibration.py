@@ -28,11 +28,6 @@ STATUS_MESSAGES = {
 }
 
 
-POORLY_DETERMINED = {u: facts.poorly for u, facts in UNITS.items()}
-"""Standard errors above these (1 mm, 0.1°) mark an estimate the data barely constrain:
-no industrial arm is calibrated usefully with a parameter that uncertain."""
-
-
 def display_unit(name: str) -> tuple[str, float]:
     """Unit and factor from SI for tables: ("mm", 1e3) for lengths, ("deg", 180/π) for
     angles (`casecal.model.parameters.UNITS`)."""
@@ -238,9 +233,10 @@ class Calibration:
 
     @property
     def poorly_determined(self) -> tuple[str, ...]:
-        """Estimated parameters whose standard error exceeds `POORLY_DETERMINED`."""
+        """Estimated parameters whose standard error exceeds its unit's `poorly` bound
+        (`casecal.model.parameters.UNITS`: 1 mm, 0.1°)."""
         return tuple(
-            n for n in self.estimated if not self.standard_errors[n] <= POORLY_DETERMINED[unit(n)]
+            n for n in self.estimated if not self.standard_errors[n] <= UNITS[unit(n)].poorly
         )
 
     @property
@@ -309,7 +305,7 @@ class Calibration:
             else:
                 meaning = self.stands_for(name)
                 status = "identified" if meaning == name else f"stands for {meaning}"
-                if se > POORLY_DETERMINED[unit(name)]:
+                if se > UNITS[unit(name)].poorly:
                     status = (
                         "poorly determined" if meaning == name else status + ", poorly determined"
                     )

@@ -16,12 +16,13 @@ error above `NEGLIGIBLE_SE` is held when
 
 - its spread exceeds the whole uncalibrated error: such an estimate could only make the
   robot worse where it was not measured (*too wide*); or
-- its standard error exceeds `PLAUSIBLE_DEVIATION` (2.5 mm, 0.5°) while its spread is below
-  half the noise and its estimate is within `SIGNIFICANT` standard errors of its start: it
-  changes nothing a measurement could see (*useless*). The bias holding it leaves is at most
-  its spread, so a few such parameters together stay within the noise; an estimate that
-  stands out of its standard error is seen by the data, however loosely, and is kept,
-  unless it has wandered beyond `ALIAS` plausible deviations (an alias, not a deviation).
+- its standard error exceeds the plausible deviation of its unit (`UNITS`: 2.5 mm, 0.5°)
+  while its spread is below half the noise and its estimate is within `SIGNIFICANT`
+  standard errors of its start: it changes nothing a measurement could see (*useless*).
+  The bias holding it leaves is at most its spread, so a few such parameters together stay
+  within the noise; an estimate that stands out of its standard error is seen by the data,
+  however loosely, and is kept, unless it has wandered beyond `ALIAS` plausible deviations
+  (an alias, not a deviation).
 
 Parameters already estimated are judged first, among themselves; then each newcomer (a
 parameter that became visible where the round ended) is admitted only if nothing becomes
@@ -43,12 +44,6 @@ from .linalg import column_scales, gauss_newton_step, nr_threshold
 NEGLIGIBLE_SE = 1e-9
 """Standard errors (m or rad) below this are rounding: never a reason to hold a parameter."""
 
-PLAUSIBLE_DEVIATION = {u: facts.plausible for u, facts in UNITS.items()}
-"""Deviations of a joint or tool parameter larger than this are not expected of a real arm
-(a nominal wrong by more, a length off by 100 mm, is found by a well-determined estimate,
-not ruled out by this). Holding a parameter rather than estimating it is the better bet
-when its standard error exceeds its deviation; past this bound it exceeds any."""
-
 SIGNIFICANT = 3.3
 """An estimate this many standard errors from its start is seen by the data: the 99.9 %
 level (a t-statistic; the audit's χ² tests use the same level), shared among the
@@ -56,7 +51,7 @@ candidates (Bonferroni: 4.2 for 43), so that of several loosely seen newcomers n
 kept by chance."""
 
 ALIAS = 20
-"""An estimate beyond this many `PLAUSIBLE_DEVIATION` whose standard error is already
+"""An estimate beyond this many plausible deviations (`UNITS`) whose standard error is already
 implausible is an alias (a wrist angle turned half a turn, its tool offset flipped),
 not a deviation."""
 
@@ -230,7 +225,7 @@ class _Judge:
         self.e0, self.W, self.noise = e0, W, noise
         self.n_points = W.shape[0] / 3
         self.free = np.array([not n.startswith(UNPRUNED_PREFIXES) for n in candidates])
-        self.plausible = np.array([PLAUSIBLE_DEVIATION[unit(n)] for n in candidates])
+        self.plausible = np.array([UNITS[unit(n)].plausible for n in candidates])
         # the 99.9 % level shared among the candidates (Bonferroni): of 18 loosely seen
         # harmonics, one 3.3 standard errors out happens by chance in one fit of 20
         from scipy.special import ndtri
@@ -295,7 +290,7 @@ def _reason(name: str, se: float, spread: float, e0: float, too_wide: bool) -> s
             text + f", moving the tool by {spread * 1e3:.3g} mm RMS on poses across the "
             f"workspace, {WIDE} ({e0 * 1e3:.3g} mm)"
         )
-    limit = PLAUSIBLE_DEVIATION[unit(name)] * scale
+    limit = UNITS[unit(name)].plausible * scale
     return (
         text + f", more than any real deviation ({limit:g} {u}), while it moves the tool by "
         f"only {spread * 1e3:.3g} mm RMS, below the noise"

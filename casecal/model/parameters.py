@@ -141,9 +141,28 @@ def is_length(name: str) -> bool:
     return name.rsplit("_", 1)[-1] in ("x", "y", "z")
 
 
+_DECLARED: dict[str, str] = {}
+"""Units that error terms declared for their parameters (`declare_unit`)."""
+
+
+def declare_unit(name: str, si: str, facts: Unit | None = None) -> None:
+    """Record that parameter `name` is in unit `si` (a key of `UNITS`, or a new one
+    described by `facts`); error terms with ``units=`` call this."""
+    if facts is not None:
+        UNITS.setdefault(si, facts)
+    if si not in UNITS:
+        raise CalibrationError(
+            f"parameter {name!r}: unit {si!r} is unknown; use one of {', '.join(UNITS)} or "
+            "describe it with a casecal.model.parameters.Unit"
+        )
+    _DECLARED[name] = si
+
+
 def unit(name: str) -> str:
     """SI unit of a parameter: ``"m"``, ``"rad"`` or, for a joint compliance ``c{i}``,
-    ``"rad/(N·m)"`` (see `UNITS`)."""
+    ``"rad/(N·m)"`` (see `UNITS`); what an error term declared for its own."""
+    if name in _DECLARED:
+        return _DECLARED[name]
     if _COMPLIANCE_RE.match(name):
         return "rad/(N·m)"
     lumped = _LUMPED_RE.match(name)

@@ -30,6 +30,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import CalibrationError
+from .parameters import declare_unit
 
 STANDARD_GRAVITY = 9.80665  # m/s²
 
@@ -85,6 +86,11 @@ class ErrorTerm:
     data : tuple
         Numbers the function reads (hashable), e.g. masses.
     target : {"angle", "link"}
+    units : tuple
+        Per parameter, its SI unit (a key of `casecal.model.parameters.UNITS`, or a pair
+        (unit, `Unit`) describing a new one, e.g. ``("m/K", Unit("µm/K", 1e6, 1e-3, 1e-5,
+        1e-3))``); by default read from the name (``*_x``: m, ``c{i}``: rad/(N·m), else
+        rad). Tables, the noise-aware rank and the audit use it.
     """
 
     kind: str
@@ -95,6 +101,7 @@ class ErrorTerm:
     data: tuple = ()
     target: str = "angle"
     code: str = ""
+    units: tuple = ()
 
     def __post_init__(self):
         if isinstance(self.parameters, str):  # ("k23") is a string, not a tuple of one
@@ -108,6 +115,12 @@ class ErrorTerm:
         # the function's own code keys the compiled kernels: an edited function never
         # reuses a kernel built from its earlier version
         object.__setattr__(self, "code", fingerprint(self.build))
+        if self.units:
+            if len(self.units) != len(self.parameters):
+                raise CalibrationError(f"error term {self.kind!r}: give one unit per parameter")
+            for name, u in zip(self.parameters, self.units, strict=True):
+                si, facts = (u, None) if isinstance(u, str) else u
+                declare_unit(name, si, facts)
         values = tuple(float(v) for v in self.values) or (0.0,) * len(self.parameters)
         if len(values) != len(self.parameters) or not all(np.isfinite(values)):
             raise CalibrationError(
