@@ -236,7 +236,7 @@ def test_a_term_written_by_the_user_is_recovered():
     assert cal.success, cal.message
     assert abs(cal.deviations["k23"] - 2e-4) < 4 * cal.standard_errors["k23"]
     assert held_out(cal, true) < SIGMA * np.sqrt(3)
-    with pytest.raises(cc.CalibrationError, match="Python code, not data"):
+    with pytest.raises(cc.CalibrationError, match="cannot be imported again"):
         cc.save_robot(cal.robot, "never-written.toml")
 
 
@@ -378,3 +378,22 @@ def test_loosely_seen_harmonics_are_not_kept_by_chance():
     for name in cal.estimated:
         if name.startswith("h6"):
             assert abs(cal.deviations[name]) < np.radians(0.5), (name, cal.deviations[name])
+
+
+def test_a_term_from_a_module_is_saved_and_loaded_by_its_import_path(tmp_path):
+    from term_examples import a2_growth
+
+    from casecal.model.terms import ErrorTerm
+
+    base = cc.load_robot("puma560").with_inputs(temperature_c=20.0)
+    term = ErrorTerm("a2 growth", 2, ("k_a2",), a2_growth, (1.2e-5,), target="link", units=("m/K",))
+    robot = base.with_terms(term)
+    cc.save_robot(robot, tmp_path / "r.toml")
+    assert 'function = "term_examples:a2_growth"' in (tmp_path / "r.toml").read_text()
+    back = cc.load_robot(tmp_path / "r.toml")
+    q = np.column_stack([cc.poses.uniform(base, 10, seed=1), np.full(10, 30.0)])
+    assert np.abs(back.position(q) - robot.position(q)).max() == 0
+    assert back.structure == robot.structure
+    inline = base.with_terms(ErrorTerm("x", 2, ("k",), lambda ctx, t: ctx.p("k")))
+    with pytest.raises(cc.CalibrationError, match="cannot be imported again"):
+        cc.save_robot(inline, tmp_path / "x.toml")

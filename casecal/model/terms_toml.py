@@ -25,7 +25,8 @@ import numpy as np
 from ..errors import CalibrationError
 from .terms import compliance_terms, harmonics
 
-TOP_KEYS = {"gravity", "compliance", "harmonics", "inputs", "payload_com"}
+TOP_KEYS = {"gravity", "compliance", "harmonics", "inputs", "payload_com", "terms"}
+BUILT_IN_KINDS = {"compliance", "lumped_compliance", "harmonics"}
 ROW_KEYS = {"mass", "com"}
 
 
@@ -95,6 +96,7 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
             raise CalibrationError(f"{label}: harmonics.orders must be [[joint, order], ...]")
         terms += [harmonics(j, k) for j, k in orders]
         values.update({k: number(v, label, f"harmonics.{k}") * angle for k, v in table.items()})
+    terms += user_terms(data, label)
     if not terms:
         return robot
     robot = robot.with_terms(*terms)
@@ -125,13 +127,8 @@ def terms_lines(robot) -> list[str]:
     by_kind: dict[str, list] = {}
     for t in robot.terms:
         by_kind.setdefault(t.kind, []).append(t)
-    other = set(by_kind) - {"compliance", "lumped_compliance", "harmonics"}
-    if other:
-        raise CalibrationError(
-            f"robot {robot.name!r}: error term {sorted(other)[0]!r} is Python code, not data, "
-            "and cannot be saved in a robot file; keep its values (--deviations-out) and "
-            "attach the term again with Robot.with_terms"
-        )
+    other = [t for t in robot.terms if t.kind not in BUILT_IN_KINDS]
+    user = [_user_lines(robot, t) for t in other]
     comp = by_kind.get("compliance", []) + by_kind.get("lumped_compliance", [])
     if by_kind.get("compliance") and by_kind.get("lumped_compliance"):
         raise CalibrationError(
@@ -142,6 +139,8 @@ def terms_lines(robot) -> list[str]:
         lumped = "true" if "lumped_compliance" in by_kind else "false"
         lines += ["", "[compliance]", f"joints = {[t.joint for t in comp]}", f"lumped = {lumped}"]
         lines += [f"{n} = {v!r}" for t in comp for n, v in zip(t.parameters, t.values, strict=True)]
+    for block in user:
+        lines += block
     if "harmonics" in by_kind:
         terms = by_kind["harmonics"]
         lines += ["", "[harmonics]", f"orders = {[[t.joint, t.data[0]] for t in terms]}"]
@@ -157,3 +156,74 @@ def inertial_lines(robot, i: int) -> list[str]:
         return []
     mass, com = robot.inertials[i]
     return [f"mass = {float(mass)!r}", "com = [" + ", ".join(repr(float(v)) for v in com) + "]"]
+
+
+def _user_lines(robot, term) -> list[str]:
+    """A ``[[terms]]`` table for a term written in Python: its function by import path."""
+    function = term.build
+    module, name = getattr(function, "__module__", None), getattr(function, "__qualname__", "")
+    if not module or module == "__main__" or "<" in name or "." in name:
+        raise CalibrationError(
+            f"robot {robot.name!r}: error term {term.kind!r} is a function that cannot be "
+            "imported again (a lambda, a nested function or one in a script); define it at "
+            "the top of a module to save it, or keep its values (--deviations-out)"
+        )
+
+    def quote(text: str) -> str:
+        return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+    units = ", ".join(quote(u if isinstance(u, str) else u[0]) for u in term.units)
+    lines = [
+        "",
+        "[[terms]]",
+        f"kind = {quote(term.kind)}",
+        f"function = {quote(module + ':' + name)}",
+        f"joint = {term.joint}",
+        f"target = {quote(term.target)}",
+        "parameters = [" + ", ".join(quote(n) for n in term.parameters) + "]",
+        "values = [" + ", ".join(repr(float(v)) for v in term.values) + "]",
+    ]
+    if term.units:
+        lines.append(f"units = [{units}]")
+    if term.data:
+        raise CalibrationError(
+            f"robot {robot.name!r}: error term {term.kind!r} carries data; only terms whose "
+            "function needs nothing but its parameters can be saved"
+        )
+    return lines
+
+
+def user_terms(data: dict, label: str) -> list:
+    """The ``[[terms]]`` tables of a robot file: terms whose functions are imported."""
+    import importlib
+
+    from .terms import ErrorTerm
+
+    out = []
+    for k, row in enumerate(data.get("terms", []), start=1):
+        where = f"{label}: terms[{k}]"
+        if not isinstance(row, dict) or not isinstance(row.get("function"), str):
+            raise CalibrationError(f'{where} needs function = "module:name"')
+        module, _, name = row["function"].partition(":")
+        try:
+            function = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError, ValueError) as exc:
+            raise CalibrationError(
+                f"{where}: function {row['function']!r} cannot be imported ({exc}); install "
+                "or put on the path the module that defines it"
+            ) from None
+        try:
+            out.append(
+                ErrorTerm(
+                    row.get("kind", name),
+                    row.get("joint"),
+                    tuple(row.get("parameters", ())),
+                    function,
+                    tuple(row.get("values", ())),
+                    target=row.get("target", "angle"),
+                    units=tuple(row.get("units", ())),
+                )
+            )
+        except TypeError as exc:
+            raise CalibrationError(f"{where}: {exc}") from None
+    return out
