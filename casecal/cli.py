@@ -727,7 +727,7 @@ def build_parser() -> argparse.ArgumentParser:
         "target; relative measurements; compliance under gravity) and write "
         "casecal-report.pdf with every figure as PNG and every table as CSV into the "
         "output folder. About 2 minutes on 2 idle cores (--quick: about 30 s); the first "
-        "run on a machine also compiles its kernels, about 15 s more.",
+        "run on a machine also compiles its kernels, about 25 s more.",
     )
     p.add_argument(
         "-o", "--output", default="reports", metavar="DIR", help="output folder (default reports/)"

@@ -57,7 +57,7 @@ PARALLEL_TOLERANCE = 0.01
 COMPILE_MIN_POSES = 200
 """Batches of at least this many poses use compiled C (when a C compiler is present)."""
 
-HOT_CALLS = 500
+HOT_CALLS = 100
 """Smaller batches of one chain and output kind, in one process, after which they too use
 compiled C: one kernel of every parameter column, its columns taken in numpy, so that the
 many column sets of repeated fits (a study's trials) share one compile per machine."""

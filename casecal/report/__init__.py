@@ -124,8 +124,8 @@ def build_report(
     out = Path(out)
     folder = building_folder(out)  # swapped in whole at the end (casecal.report.folder)
     t0 = time.perf_counter()
-    run = study_runner(executor, workers, scheduler, progress)
-    results = run_studies(list(STUDIES), folder, quick, run, log)
+    with study_runner(executor, workers, scheduler, progress) as run:
+        results = run_studies(list(STUDIES), folder, quick, run, log)
     elapsed = time.perf_counter() - t0
     settings = [
         f"casecal {__version__}; Python {platform.python_version()}; CasADi {casadi.__version__}; "

@@ -17,7 +17,7 @@ def main(name: str, doc: str) -> None:
     parser.add_argument("--quick", action="store_true", help="smaller grid")
     parser.add_argument("--serial", action="store_true", help="no worker processes")
     args = parser.parse_args()
-    run = study_runner("serial" if args.serial else "processes")
-    (result,) = run_studies([name], Path(args.output), args.quick, run, log=print)
+    with study_runner("serial" if args.serial else "processes") as run:
+        (result,) = run_studies([name], Path(args.output), args.quick, run, log=print)
     for item in [*result.tables, *result.figures]:
         print(f"wrote {item.path}")

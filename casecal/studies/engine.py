@@ -271,7 +271,8 @@ def run_study(
         rms_holdout_mm, rms_holdout_before_mm, max_abs_rel_error, and per parameter
         true_*, dev_*, se_* (SI) and err_* (relative error). Rows in `trials` order.
     """
-    if not isinstance(executor, Executor):
+    own = not isinstance(executor, Executor)
+    if own:
         executor = Executor(executor, workers, scheduler, progress)
     # trials of one robot, schedule and pose count share their poses; batches of them, about
     # four per worker in all, keep every worker busy however few groups the grid has
@@ -279,7 +280,11 @@ def run_study(
     batches = [
         (grid, group[i : i + size]) for group in _groups(grid) for i in range(0, len(group), size)
     ]
-    results = executor.map(_run_batch, batches, cost=lambda b: b[1][0].n_poses * len(b[1]))
+    try:
+        results = executor.map(_run_batch, batches, cost=lambda b: b[1][0].n_poses * len(b[1]))
+    finally:
+        if own:  # workers of an executor made here stop here; a caller's live on
+            executor.close()
     return pd.DataFrame([row for batch in results for row in batch])
 
 

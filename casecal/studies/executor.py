@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..errors import CalibrationError
 
@@ -32,12 +32,16 @@ class Executor:
         starts a LocalCluster.
     progress : callable(done, total), optional
         Called after each task finishes (the core itself never prints).
+
+    Local worker processes start at the first `map` and serve every later one, keeping
+    what they loaded; `close` (or ``with Executor(...) as run:``) stops them.
     """
 
     kind: str = "processes"
     workers: int | None = None
     scheduler: object = None
     progress: Callable[[int, int], None] | None = None
+    _pool: object = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.kind not in EXECUTORS:
@@ -83,13 +87,32 @@ class Executor:
     def _local(self, func, tasks, order):
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
+        # one pool for every map of this executor: the workers keep what they built
+        # (kernels loaded, chains that are hot) from one study to the next
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=self.n_workers, initializer=_worker_start)
         results: list = [None] * len(tasks)
-        with ProcessPoolExecutor(max_workers=self.n_workers, initializer=_worker_start) as pool:
-            futures = {pool.submit(func, tasks[i]): i for i in order}
+        futures = {self._pool.submit(func, tasks[i]): i for i in order}
+        try:
             for done, fut in enumerate(as_completed(futures), start=1):
                 results[futures[fut]] = fut.result()
                 self._tick(done, len(tasks))
+        except BaseException:
+            self.close()  # a failed or interrupted study leaves no workers behind
+            raise
         return results
+
+    def close(self) -> None:
+        """Stop the worker processes, if any (a later `map` starts new ones)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def __enter__(self) -> Executor:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     def _dask(self, func, tasks, order):
         try:
