@@ -537,6 +537,10 @@ def build_parser() -> argparse.ArgumentParser:
             help="random seed for uniform poses and noise (default 0)",
         )
 
+    robot_out_help = (
+        "write the calibrated robot here: .toml, .urdf (a URDF robot's own file with the "
+        "calibrated numbers; a DH robot as a new URDF) or .yaml (UR kinematics file)"
+    )
     params_help = (
         "parameters: names, families or 'all', comma-separated, e.g. "
         "'theta*,a*,d*' or '*.offset' (default: the paper's theta, a, d, a URDF robot's "
@@ -645,13 +649,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="fail (exit 2, nothing written) if any asked-for parameter cannot be identified, "
         "instead of holding it at nominal and saying so",
     )
-    p.add_argument(
-        "-o",
-        "--output",
-        metavar="FILE",
-        help="write the calibrated robot here: .toml, or .urdf (a URDF robot's own file with "
-        "the calibrated numbers; a DH robot as a new URDF)",
-    )
+    p.add_argument("-o", "--output", metavar="FILE", help=robot_out_help)
     p.set_defaults(func=_cmd_identify)
 
     p = command(
@@ -689,13 +687,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="how to choose the next poses (default optimal)",
     )
     p.add_argument("--parameters", default=None, help=params_help)
-    p.add_argument(
-        "-o",
-        "--output",
-        metavar="FILE",
-        help="write the calibrated robot here: .toml, or .urdf (a URDF robot's own file with "
-        "the calibrated numbers; a DH robot as a new URDF)",
-    )
+    p.add_argument("-o", "--output", metavar="FILE", help=robot_out_help)
     p.set_defaults(func=_cmd_calibrate_until)
 
     p = command(
