@@ -124,6 +124,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
             raise CalibrationError("an output file name is empty; give a file name")
         if out:  # fail before the work, not after it
             _check_writable_dir(os.path.dirname(os.path.abspath(out)))
+    _check_robot_format(args, robot)
     noise = parse_length(args.noise) if args.noise is not None else None
     truth = load_deviations(args.truth, robot) if args.truth else None
     held = None
@@ -206,6 +207,15 @@ def _write_calibrated(args: argparse.Namespace, robot) -> None:
         print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
 
 
+def _check_robot_format(args: argparse.Namespace, robot) -> None:
+    """Refuse, before the fit, an -o format that cannot hold this robot (a UR kinematics
+    file for a robot without UR joints): the calibrated one would not fit either."""
+    if args.output:
+        from .model.save import robot_text
+
+        robot_text(robot, args.output)
+
+
 def _robot_text(args: argparse.Namespace, robot) -> str:
     """The -o file's text in the format its extension names (.toml, .urdf); what that
     format cannot hold is said on standard error."""
@@ -270,6 +280,7 @@ def _cmd_calibrate_until(args: argparse.Namespace) -> None:
     pool = read_csv(args.pool, robot)
     if args.output:
         _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
+        _check_robot_format(args, robot)
     candidates, measure = pool_measure(pool)
     run = calibrate_until(
         robot,

@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> None:
 
     calibrated = cli.robot_for(args, args.robot)
     nominal = cli.robot_for(args, args.nominal) if args.nominal else None
-    df, label = read_table(args.targets)
+    df, label = read_table(args.targets, "targets file")
     q = read_joints(df, calibrated, label)
     result = compensate(calibrated, q, nominal)
     columns = {}

@@ -159,6 +159,12 @@ def test_the_command_line_reads_and_writes_urdf(tmp_path, capsys):
     argv = ["identify", str(tmp_path / "kr16.toml"), str(tmp_path / "m.csv"), "-o", str(out)]
     assert main([*argv, "--parameters", "all"]) == 0
     assert cc.load_robot(out).dof == 6
+    # a format that cannot hold this robot is refused before the fit, not after it
+    capsys.readouterr()
+    yaml = ["identify", str(tmp_path / "kr16.toml"), str(tmp_path / "m.csv"), "-o", "k.yaml"]
+    assert main(yaml) == 2
+    captured = capsys.readouterr()
+    assert "UR kinematics file needs" in captured.err and "Answer audit" not in captured.out
 
 
 def test_joint_offsets_fold_into_the_origins(tmp_path):

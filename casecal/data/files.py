@@ -176,7 +176,7 @@ def _orientations(df: pd.DataFrame, columns, label: str) -> np.ndarray | None:
     return matrix_from_quaternion(quat / norm[:, None])
 
 
-def read_table(path) -> tuple[pd.DataFrame, str]:
+def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]:
     """A CSV file as a DataFrame of strings, checked: it exists, parses, has unique columns
     and at least one row. Returns the frame and the label for messages.
 
@@ -185,7 +185,7 @@ def read_table(path) -> tuple[pd.DataFrame, str]:
     read with that separator.
     """
     label = "standard input" if str(path) == "-" else str(path)
-    text = read_text(path, "measurement file")
+    text = read_text(path, what)
     first = text.split("\n", 1)[0]
     sep = next((d for d in ("\t", ";") if d in first and "," not in first), ",")
     try:

@@ -124,17 +124,15 @@ def compensate(
     lo = np.array([-np.inf if j.limits is None else j.limits[0] for j in real.joints])
     hi = np.array([np.inf if j.limits is None else j.limits[1] for j in real.joints])
     outside = (q[:, : real.dof] < lo - 1e-12) | (q[:, : real.dof] > hi + 1e-12)
-    reason = []
-    for k in range(len(q)):
+    ok = converged & (miss <= REACHED) & ~outside.any(axis=1)
+    reason = [""] * len(q)
+    for k in np.flatnonzero(~ok):  # words only for the rows that need them
         if not converged[k]:
-            reason.append("singular" if singular[k] else "no convergence")
+            reason[k] = "singular" if singular[k] else "no convergence"
         elif miss[k] > REACHED:
-            reason.append(f"out of reach ({miss[k] * 1e3:.3g} mm or mrad off)")
-        elif outside[k].any():
-            reason.append(f"outside the limits of joint {int(np.argmax(outside[k])) + 1}")
+            reason[k] = f"out of reach ({miss[k] * 1e3:.3g} mm or mrad off)"
         else:
-            reason.append("")
-    ok = np.array([r == "" for r in reason])
+            reason[k] = f"outside the limits of joint {int(np.argmax(outside[k])) + 1}"
     q = np.where(ok[:, None], q, q_t)
     e = _errors(real, q, target)  # where the returned values put the tool
     return Compensation(
