@@ -11,6 +11,9 @@ so `identify` runs with one BLAS thread, and study workers do too.
 from __future__ import annotations
 
 import functools
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 
 _CONTROLLER = None
@@ -38,3 +41,40 @@ def with_one_blas_thread(func):
             return func(*args, **kwargs)
 
     return wrapper
+
+
+def cores() -> int:
+    """Cores this process may run on (``$CASECAL_THREADS`` caps it), at least 1."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        n = os.cpu_count() or 1
+    cap = os.environ.get("CASECAL_THREADS", "")
+    return max(1, min(n, int(cap))) if cap.isdigit() and int(cap) > 0 else max(n, 1)
+
+
+_POOL: tuple[int, ThreadPoolExecutor] | None = None  # (pid, pool): a fork has no threads
+
+
+def thread_map(func, items: list) -> list:
+    """``[func(item) for item in items]`` on up to `cores` threads.
+
+    For work that releases the GIL (compiled kernels called through ctypes, LAPACK through
+    scipy): each item runs single-threaded, so the threads never wait on each other as
+    BLAS's own do, and a busy machine costs no more than the serial loop. The pool is
+    created on first use and kept (threads only, no memory held between calls).
+    """
+    global _POOL
+    if len(items) < 2 or cores() < 2 or getattr(_INSIDE, "pool", False):
+        return [func(item) for item in items]  # a pool thread waiting on the pool: deadlock
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(cores(), thread_name_prefix="casecal"))
+    return list(_POOL[1].map(functools.partial(_inside, func), items))
+
+
+_INSIDE = threading.local()
+
+
+def _inside(func, item):
+    _INSIDE.pool = True
+    return func(item)

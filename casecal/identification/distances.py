@@ -24,7 +24,7 @@ from .audit import Facts, audit, smoothness
 from .calibration import Calibration
 from .evidence import outside_gain
 from .fit import METHODS, check_iterations, verdict
-from .linalg import gauss_newton_step
+from .linalg import Reduction, gauss_newton_step
 from .rounds import MAX_ROUNDS
 from .solvers import ROUNDING, SOLVERS, floor_cost
 from .uncertainty import uncertainty
@@ -181,6 +181,10 @@ class _DistanceProblem:
         J, _ = self._robot(x).position_jacobian(self.q, list(self.names))
         Jd = np.einsum("pi,pik->pk", u, J[self.m.pairs[:, 0]] - J[self.m.pairs[:, 1]])
         return Jd * self.w_flat[:, None]
+
+    def reduced(self, x, r=None) -> Reduction:
+        """The weighted ``[J | r]`` at `x` as the solvers take it (pairs are few: whole)."""
+        return Reduction.of(self.jacobian(x), self.residual(x) if r is None else r)
 
 
 def identify_distances(

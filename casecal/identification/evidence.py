@@ -22,7 +22,6 @@ import numpy as np
 
 from ..model.robot import Robot
 from .analysis import analyse
-from .linalg import gauss_newton_step
 from .problem import Problem
 from .rounds import workspace_jacobian, workspace_poses
 
@@ -96,15 +95,14 @@ def outside_gain(problem: Problem, estimated) -> Outside:
         The estimated parameters.
     """
     names = list(problem.names)
-    x0 = np.zeros(len(names))
-    J, r = problem.jacobian(x0), problem.residual(x0)
+    linear = problem.reduced(np.zeros(len(names)))
     est = [names.index(n) for n in estimated]
-    base = analyse(J, names, problem.q.shape[0], prefer=list(estimated)).base_parameters
+    base = analyse(linear.R, names, problem.q.shape[0], prefer=list(estimated)).base_parameters
     extra = [names.index(n) for n in base if n not in estimated]
     if not extra:
         return Outside()
-    inside = gauss_newton_step(J[:, est], r)[1] if est else 0.0
-    gain = gauss_newton_step(J[:, est + extra], r)[1] - inside
-    alone = {names[k]: gauss_newton_step(J[:, [*est, k]], r)[1] - inside for k in extra}
+    inside = linear.columns(est).solve()[1] if est else 0.0
+    gain = linear.columns(est + extra).solve()[1] - inside
+    alone = {names[k]: linear.columns([*est, k]).solve()[1] - inside for k in extra}
     leading = sorted(alone, key=alone.get, reverse=True)[:4]
     return Outside(max(gain, 0.0), len(extra), tuple(leading))

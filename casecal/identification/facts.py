@@ -15,7 +15,7 @@ import numpy as np
 
 from .audit import Facts, predicted_rms, smoothness
 from .evidence import blind_only_here, outside_gain, still_joints
-from .linalg import gauss_newton_step
+from .linalg import Reduction
 from .outliers import outlier_poses
 from .problem import Problem
 from .rank import held_gain
@@ -66,26 +66,29 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
         RMS error at the start, m.
     """
     robust = settings.loss != "linear"
-    final, at_start = make(out.robot, names=names), make(start, names=names)
+    outside = _outside(robot, names)
+    # one kernel of the asked-for and the other parameters: one pass over the poses
+    # serves the covariance, the held parameters' gain and the outside ones'
+    final = make(out.robot, names=names, kernel_names=[*names, *outside])
+    at_start = make(start, names=names)
     if robust:
         final, at_start = final.reweighted(out.weights), at_start.reweighted(out.weights)
     est = final.restricted(out.estimated)
     x0 = np.zeros(len(out.estimated))
-    J, r = est.jacobian(x0), est.residual(x0)
+    linear = est.reduced(x0)
     prior_w = np.array([1.0 / settings.prior.get(n, np.inf) for n in out.estimated])
-    cov, _ = uncertainty(J, r, settings.known, names, out.estimated, prior_w)
+    cov, _ = uncertainty(linear, None, settings.known, names, out.estimated, prior_w)
     deviation = np.array([out.robot.parameters[n] - start.parameters[n] for n in out.estimated])
-    J_fit, r_fit = _with_prior(J, r, prior_w, deviation)
+    fit = _with_prior(linear, prior_w, deviation)
     r_start = at_start.residual(np.zeros(len(names)))
     active = _active(out.estimated, deviation, settings.bounds)
     free = [i for i, n in enumerate(out.estimated) if n not in active]
-    decrease = gauss_newton_step(J_fit[:, free], r_fit)[1] if free else 0.0
+    decrease = fit.columns(free).solve()[1] if free else 0.0
     point_residuals = est.point_residuals(x0)
     q = est.q
     outliers = outlier_poses(make(out.robot, names=names), settings.w, settings.known)
     inliers = _inliers(make(out.robot, names=out.estimated), outliers) if robust else None
-    beyond = make(out.robot, names=[*out.estimated, *_outside(robot, names)])
-    unasked = outside_gain(beyond.reweighted(out.weights) if robust else beyond, out.estimated)
+    unasked = outside_gain(final.restricted([*out.estimated, *outside]), out.estimated)
     keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
     n_prior = int(np.sum(prior_w > 0))
     workspace = predicted_rms(out.robot, start, out.estimated, cov)
@@ -93,11 +96,11 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
         solver_status=out.solver_status,
         solver_message=out.message,
         cost_start=0.5 * float(r_start @ r_start),
-        cost_final=0.5 * float(r_fit @ r_fit),
+        cost_final=0.5 * fit.rr,
         floor=floor_cost(est, ROUNDING),
         predicted_decrease=decrease,
         known=settings.known,
-        dof=(inliers[1] if inliers else r.size - len(out.estimated)) + n_prior,
+        dof=(inliers[1] if inliers else linear.rows - len(out.estimated)) + n_prior,
         rms_start=e0,
         rms_final=point_rms(point_residuals),
         settled=out.settled,
@@ -114,8 +117,7 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
         held=tuple(out.pruned),
         smoothness=smoothness(q[keep], point_residuals[keep]),
         held_gain=held_gain(
-            final.jacobian(np.zeros(len(names))),
-            final.residual(np.zeros(len(names))),
+            final.reduced(np.zeros(len(names))),
             names,
             out.estimated,
             out.pruned,
@@ -136,7 +138,7 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
         inliers=inliers,
         n_prior=n_prior,
         bounds=None if not settings.bounds else tuple(active),
-        bound_gain=gauss_newton_step(J_fit, r_fit)[1] - decrease if active else 0.0,
+        bound_gain=fit.solve()[1] - decrease if active else 0.0,
     )
     return Gathered(facts, cov, est, final, outliers)
 
@@ -145,13 +147,12 @@ def _outside(robot, names) -> list[str]:
     return [n for n in robot.parameter_names if n not in names]
 
 
-def _with_prior(J, r, prior_w, deviation):
-    """The prior's pseudo-observations ``0 = deviation ± σ_p`` as rows of J and r."""
+def _with_prior(linear: Reduction, prior_w, deviation) -> Reduction:
+    """The prior's pseudo-observations ``0 = deviation ± σ_p`` as rows of ``[J | r]``."""
     rows = prior_w > 0
     if not np.any(rows):
-        return J, r
-    J_p = np.diag(prior_w)[rows]
-    return np.vstack([J, J_p]), np.concatenate([r, -(prior_w * deviation)[rows]])
+        return linear
+    return linear.fold(np.diag(prior_w)[rows], -(prior_w * deviation)[rows])
 
 
 BOUND_TOLERANCE = 1e-6

@@ -27,6 +27,7 @@ from functools import partial
 from numbers import Integral, Real
 
 import numpy as np
+import pandas as pd
 
 from .._threads import with_one_blas_thread
 from ..data.measurements import Measurements, broadcast_sigma
@@ -162,13 +163,15 @@ def identify(
     w_rot = _orientation_weight(measurements, orientation_sigma, known, w)
 
     frame, frame_note = choose_frame(robot, q, y, sigma, names, np.mean(w**2, axis=1))
-    make = partial(
-        Problem,
-        q=q,
-        y=frame.points_in(y),
-        w=w,
-        orientations=frame.rotations_in(measurements.orientations),
-        w_rot=w_rot,
+    make = _shared(
+        partial(
+            Problem,
+            q=q,
+            y=frame.points_in(y),
+            w=w,
+            orientations=frame.rotations_in(measurements.orientations),
+            w_rot=w_rot,
+        )
     )
     start, start_note = robot, frame_note
     if frame.is_identity:
@@ -235,13 +238,36 @@ def identify(
     return cal.compare_to(truth) if truth is not None else cal
 
 
+SHARED_PROBLEMS = 3
+"""Problems `_shared` keeps: each holds a few residual vectors of the data's size."""
+
+
+def _shared(make):
+    """`make` returning the same `Problem` for the same robot and columns, so that the
+    rounds, the solver and the audit share its memoised residuals and reductions (a pass
+    over a million poses costs a second). Lives as long as one `identify` call."""
+    kept: dict = {}
+
+    def shared(robot, names, kernel_names=None, **other):
+        if other:
+            return make(robot, names=names, kernel_names=kernel_names, **other)
+        key = (robot.structure, robot.vector().tobytes(), tuple(names), tuple(kernel_names or ()))
+        problem = kept.pop(key, None) or make(robot, names=names, kernel_names=kernel_names)
+        kept[key] = problem  # the latest last
+        while len(kept) > SHARED_PROBLEMS:
+            kept.pop(next(iter(kept)))
+        return problem
+
+    return shared
+
+
 def _representation(calibrated, final, frame, make_world, names, out):
     """What each estimate stands for, with the base frame in the instrument's frame."""
     if not frame.is_identity:
         final = make_world(calibrated, names=names)
     if out.end_analysis is out.start_analysis:  # one-shot: what it saw where it linearised
         final = make_world(frame.robot_out(out.start_robot), names=names)
-    return represent(final.jacobian(np.zeros(len(names))), names, out.estimated, out.pruned)
+    return represent(final.reduced(np.zeros(len(names))).R, names, out.estimated, out.pruned)
 
 
 def verdict(checks, solver_status: int, solver_message: str | None) -> tuple[int, str]:
@@ -309,7 +335,9 @@ def _orientation_weight(measurements: Measurements, orientation_sigma, known, w)
 
 def _repeats(q: np.ndarray, y: np.ndarray) -> str:
     """A note when rows repeat earlier ones exactly (a file pasted twice), else ""."""
-    rows = np.hstack([q, y.reshape(len(q), -1)])
+    # only rows whose first joint value repeats can repeat: a hash, not a sort of all rows
+    again = pd.Series(q[:, 0]).duplicated(keep=False).to_numpy()
+    rows = np.hstack([q[again], y[again].reshape(int(again.sum()), y[0].size)])
     n = len(rows) - len(np.unique(rows, axis=0))
     if not n:
         return ""

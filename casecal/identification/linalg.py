@@ -7,6 +7,8 @@ factor of a tall Jacobian instead of the Jacobian itself.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 
@@ -18,28 +20,6 @@ def nr_threshold(s: np.ndarray, shape: tuple[int, int]) -> float:
     """
     m, n = shape
     return 0.5 * np.sqrt(m + n + 1.0) * (s[0] if s.size else 0.0) * np.finfo(float).eps
-
-
-def triangular(J: np.ndarray, r: np.ndarray | None = None):
-    """Reduce a tall ``J`` (and ``r``) to the R factor of its QR decomposition.
-
-    ``J = Q R`` keeps every inner product of columns (``JᵀJ = RᵀR``), so the singular values,
-    right singular vectors and least-squares solution of ``J`` are those of the small R,
-    with ``Qᵀ r`` in place of ``r``. QR of ``[J | r]`` gives both at once, several times
-    faster than an SVD of the tall ``J``.
-
-    Returns
-    -------
-    R : ndarray, shape (min(m, k), k)
-    Qtr : ndarray, shape (min(m, k),) or None
-    """
-    m, k = J.shape
-    if r is None:
-        return (np.linalg.qr(J, mode="r") if m > k else J), None
-    if m <= k:
-        return J, r
-    Ra = np.linalg.qr(np.column_stack([J, r]), mode="r")
-    return Ra[:k, :k], Ra[:k, k]
 
 
 ZERO_COLUMN = 1e-8
@@ -55,21 +35,127 @@ def column_scales(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.where(zero, 1.0, norms), zero
 
 
-def svd_solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+@dataclass(frozen=True)
+class Reduction:
+    """A tall weighted least-squares system ``[J | r]`` (rows × k) held by its QR reduction.
+
+    ``[J | r] = Q [R | Qᵀr]`` keeps every inner product of the columns (``JᵀJ = RᵀR``,
+    ``Jᵀr = Rᵀ Qᵀr``), so the step, the predicted decrease, the singular values, the null
+    space and the covariance of ``min |J z - r|`` follow from the small R, ``Qᵀr`` and
+    ``|r|²``; the number of rows is kept for the cut-offs and the degrees of freedom. Rows
+    are folded in as they come (`fold`), so a million poses need no tall array in memory.
+    Householder QR is column-wise backward stable, so R of the unscaled J, its columns
+    scaled afterwards, is as accurate as R of the scaled J; normal equations would square
+    the condition number and lose the blind directions below √ε (`RANK_TOLERANCE` is
+    1e-8).
+
+    Attributes
+    ----------
+    R : ndarray, shape (s, k), s ≤ k
+        Upper triangular factor of the weighted Jacobian, units of J.
+    Qtr : ndarray, shape (s,)
+    rr : float
+        ``|r|²`` (what the rows hold in all, also what no column explains).
+    rows : int
+        Rows of the tall system.
+    """
+
+    R: np.ndarray
+    Qtr: np.ndarray
+    rr: float
+    rows: int
+
+    @classmethod
+    def empty(cls, k: int) -> Reduction:
+        return cls(np.zeros((0, k)), np.zeros(0), 0.0, 0)
+
+    @classmethod
+    def of(cls, J: np.ndarray, r: np.ndarray) -> Reduction:
+        """The reduction of a tall `J` (rows × k) and `r` (rows,)."""
+        return cls.empty(J.shape[1]).fold(J, r)
+
+    @property
+    def k(self) -> int:
+        return self.R.shape[1]
+
+    @property
+    def norms(self) -> np.ndarray:
+        """Column norms of J, shape (k,)."""
+        return np.linalg.norm(self.R, axis=0)
+
+    @property
+    def rss_out(self) -> float:
+        """``|r|² - |Qᵀr|²``: the part of r no combination of the columns explains."""
+        return max(self.rr - float(self.Qtr @ self.Qtr), 0.0)
+
+    def fold(self, J: np.ndarray, r: np.ndarray) -> Reduction:
+        """This system with the rows ``[J | r]`` added, shape (m, k) and (m,)."""
+        k, s = self.k, self.R.shape[0]
+        A = np.empty((s + J.shape[0], k + 1), order="F")
+        A[:s, :k], A[:s, k] = self.R, self.Qtr
+        A[s:, :k], A[s:, k] = J, r
+        Ra = _r_factor(A)
+        t = min(Ra.shape[0], k)
+        return Reduction(Ra[:t, :k], Ra[:t, k], self.rr + float(r @ r), self.rows + int(J.shape[0]))
+
+    def merge(self, other: Reduction) -> Reduction:
+        """The system of this one's rows and `other`'s (same columns)."""
+        both = self.fold(other.R, other.Qtr)
+        return Reduction(both.R, both.Qtr, self.rr + other.rr, self.rows + other.rows)
+
+    def columns(self, index) -> Reduction:
+        """The system of the columns `index` of J only (same rows and r)."""
+        index = list(index)
+        A = np.column_stack([self.R[:, index], self.Qtr])
+        Ra = _r_factor(np.asfortranarray(A)) if A.shape[0] > len(index) else A
+        t = min(Ra.shape[0], len(index))
+        return Reduction(Ra[:t, : len(index)], Ra[:t, len(index)], self.rr, self.rows)
+
+    def scaled(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(R D⁻¹, D, zero)``: R with unit-norm columns (`column_scales`), zero columns 0."""
+        norms, zero = column_scales(self.R)
+        return np.where(zero, 0.0, self.R / norms), norms, zero
+
+    def solve(self) -> tuple[np.ndarray, float]:
+        """``x = D V S⁺ Uᵀ Qᵀr`` of the column-scaled system (`nr_threshold` cut-off) and the
+        cost decrease ``0.5 |Qᵀr|² - 0.5 |Qᵀr - R x|²`` the linear model predicts."""
+        Rs, norms, _ = self.scaled()
+        if Rs.shape[0] == 0:
+            return np.zeros(self.k), 0.0
+        U, s, Vt = np.linalg.svd(Rs, full_matrices=False)
+        keep = s > nr_threshold(s, (self.rows, self.k))
+        proj = U[:, keep].T @ self.Qtr
+        z = Vt[keep].T @ (proj / s[keep])
+        return z / norms, 0.5 * float(proj @ proj)
+
+
+def _r_factor(A: np.ndarray) -> np.ndarray:
+    """The R factor (min(m, n) × n) of a Fortran-ordered `A`, which it overwrites."""
+    from scipy.linalg import lapack
+
+    qr, _, _, info = lapack.dgeqrf(A, overwrite_a=True)
+    if info:
+        raise ValueError(f"internal error: LAPACK dgeqrf returned {info}")
+    return np.triu(qr[: min(A.shape)])
+
+
+def svd_solve(J, r: np.ndarray | None = None) -> np.ndarray:
     """``x = D V S⁺ Uᵀ r`` for the column-scaled ``J D``: the paper's SVD least squares.
 
-    Computed on the R factor of ``J D`` (`triangular`): the same singular values and V.
+    `J` is a tall Jacobian with its residual `r`, or a `Reduction` (then no `r`); computed
+    on the R factor either way (same singular values and V).
     """
-    norms, zero = column_scales(J)
-    R, Qtr = triangular(np.where(zero, 0.0, J / norms), r)
-    U, s, Vt = np.linalg.svd(R, full_matrices=False)
-    keep = s > nr_threshold(s, J.shape)
-    z = Vt[keep].T @ ((U[:, keep].T @ Qtr) / s[keep])
-    return z / norms
+    return _reduction(J, r).solve()[0]
 
 
-def gauss_newton_step(J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float]:
+def gauss_newton_step(J, r: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """The Gauss-Newton step of the scaled problem and the cost decrease it predicts.
+
+    Parameters
+    ----------
+    J : ndarray, shape (rows, k), or Reduction
+        Weighted Jacobian (with `r`), or a `Reduction` of both.
+    r : ndarray, shape (rows,), optional
 
     Returns
     -------
@@ -79,10 +165,8 @@ def gauss_newton_step(J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float]:
         ``0.5 |r|² - 0.5 |r - J step|²`` of the linear model: what one more step could
         still gain. Zero at a minimum; the convergence and optimality tests use it.
     """
-    norms, zero = column_scales(J)
-    R, Qtr = triangular(np.where(zero, 0.0, J / norms), r)
-    U, s, Vt = np.linalg.svd(R, full_matrices=False)
-    keep = s > nr_threshold(s, J.shape)
-    proj = U[:, keep].T @ Qtr
-    z = Vt[keep].T @ (proj / s[keep])
-    return z / norms, 0.5 * float(proj @ proj)
+    return _reduction(J, r).solve()
+
+
+def _reduction(J, r) -> Reduction:
+    return J if isinstance(J, Reduction) else Reduction.of(J, r)

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.parameters import UNITS, unit
-from .linalg import column_scales, gauss_newton_step, nr_threshold
+from .linalg import Reduction, column_scales, nr_threshold
 
 NEGLIGIBLE_SE = 1e-9
 """Standard errors (m or rad) below this are rounding: never a reason to hold a parameter."""
@@ -75,12 +75,13 @@ def chi2_quantile(level: float, dof: int) -> float:
     return float(chdtri(dof, 1.0 - level))
 
 
-def held_gain(J: np.ndarray, r: np.ndarray, names, estimated, held) -> float:
+def held_gain(linear: Reduction, names, estimated, held) -> float:
     """Cost decrease (one linearised step) that freeing `held` would add to what the
-    `estimated` parameters can still gain; `J` (weighted, all `names`) and `r` at the point."""
+    `estimated` parameters can still gain; `linear`: the weighted ``[J | r]`` of all
+    `names` at the point."""
     est = [names.index(n) for n in estimated]
     both = [names.index(n) for n in names if n in estimated or n in held]
-    return gauss_newton_step(J[:, both], r)[1] - gauss_newton_step(J[:, est], r)[1]
+    return linear.columns(both).solve()[1] - linear.columns(est).solve()[1]
 
 
 def held_matter(gain: float, n_held: int, cost: float, dof: int, known: bool):
@@ -131,16 +132,8 @@ class Reduced:
     known: bool
 
     @classmethod
-    def of(cls, J: np.ndarray, r: np.ndarray, known: bool) -> Reduced:
-        norms, zero = column_scales(J)
-        Js = np.where(zero, 0.0, J / norms)
-        if J.shape[0] > J.shape[1]:
-            Ra = np.linalg.qr(np.column_stack([Js, r]), mode="r")
-            R, Qtr = Ra[: J.shape[1], : J.shape[1]], Ra[: J.shape[1], J.shape[1]]
-        else:
-            R, Qtr = Js, r
-        R = R * norms  # back to physical units: R of J itself
-        return cls(R, Qtr, max(float(r @ r - Qtr @ Qtr), 0.0), J.shape[0], known)
+    def of(cls, linear: Reduction, known: bool) -> Reduced:
+        return cls(linear.R, linear.Qtr, linear.rss_out, linear.rows, known)
 
     def fit(self, subset: list[int]) -> tuple[np.ndarray, np.ndarray]:
         """Step and covariance of the parameters `subset` alone (the others at the point)."""
@@ -158,13 +151,13 @@ class Reduced:
         return step, C
 
 
-def prune(J, r, names, candidates, offsets, known, e0, J_work, noise, established, protected=()):
+def prune(linear, names, candidates, offsets, known, e0, J_work, noise, established, protected=()):
     """Which of the structurally identifiable `candidates` to hold (module doc).
 
     Parameters
     ----------
-    J, r : ndarray
-        Weighted Jacobian (all `names`) and residual at the current point.
+    linear : Reduction
+        Of the weighted Jacobian (all `names`) and residual at the current point.
     names, candidates : sequence of str
         `candidates` in seniority (what was estimated, then newcomers in pivot order).
     offsets : ndarray, shape (len(candidates),)
@@ -192,7 +185,7 @@ def prune(J, r, names, candidates, offsets, known, e0, J_work, noise, establishe
     if not candidates:
         return [], {}
     idx = [names.index(n) for n in candidates]
-    reduced = Reduced.of(J[:, idx], r, known)
+    reduced = Reduced.of(linear.columns(idx), known)
     if noise is None:  # per-coordinate RMS of what all candidates leave, times √3
         step, _ = reduced.fit(list(range(len(idx))))
         rest = reduced.rss_out + float(np.sum((reduced.Qtr - reduced.R @ step) ** 2))

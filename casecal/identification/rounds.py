@@ -156,9 +156,12 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
             # the paper's one linearisation: what it saw is what it saw at the start
             settled = True
             break
-        full = _problem(make, point, names, settings, weights)
-        J, r = full.jacobian(np.zeros(len(names))), full.residual(np.zeros(len(names)))
-        end_analysis = analyse(J, names, full.q.shape[0], prefer=order)
+        # with every parameter's columns: the audit reuses this pass where the fit ends
+        every = [*names, *(n for n in start.parameter_names if n not in names)]
+        full = _problem(make, point, names, settings, weights, kernel_names=every)
+        r = full.residual(np.zeros(len(names)))
+        linear = full.reduced(np.zeros(len(names)), r)
+        end_analysis = analyse(linear.R, names, full.q.shape[0], prefer=order)
         base = end_analysis.base_parameters
         visible = [n for n in order if n in base]
         visible += [
@@ -172,8 +175,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         noise = float(np.sqrt(3 * np.mean(1.0 / settings.w**2))) if settings.known else None
         offsets = np.array([point.parameters[n] - hold[n] for n in visible])
         keep, dropped = prune(
-            J,
-            r,
+            linear,
             names,
             visible,
             offsets,
@@ -193,7 +195,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
             # and keeps its fitted value, and a minimum over the larger set is one over
             # the rest with it fixed, so the fit has settled where it stands
             order = keep
-            misjudged = _held_that_matter(J, r, names, order, pruned, settings)
+            misjudged = _held_that_matter(linear, names, order, pruned, settings)
             if not misjudged or set(misjudged) <= protected:
                 settled = True
                 break
@@ -236,14 +238,14 @@ FROZEN = "blind where the fit ended; held at the value it was fitted to while vi
 WORKSPACE_POSES = 200
 
 
-def _held_that_matter(J, r, names, order, pruned, settings) -> list[str]:
+def _held_that_matter(linear, names, order, pruned, settings) -> list[str]:
     """The parameters held as useless, if freeing them would gain more than chance."""
     useless = [n for n, why in pruned.items() if WIDE not in why and n in names]
     if not useless:
         return []
-    gain = held_gain(J, r, names, order, useless)
+    gain = held_gain(linear, names, order, useless)
     matter = held_matter(
-        gain, len(useless), 0.5 * float(r @ r), r.size - len(order), settings.known
+        gain, len(useless), 0.5 * linear.rr, linear.rows - len(order), settings.known
     )
     return [n for n in names if n in useless] if matter[0] else []
 
@@ -274,7 +276,7 @@ def workspace_poses(robot: Robot):
 def check_analysis(full: Problem) -> Observability:
     """Identifiability at `full`'s robot, refusing data that cannot decide it."""
     names = full.names
-    obs = analyse(full.jacobian(np.zeros(len(names))), names, full.q.shape[0])
+    obs = analyse(full.reduced(np.zeros(len(names))).R, names, full.q.shape[0])
     n_poses, rows = full.q.shape[0], full.w_flat.size
     if obs.rank >= rows and len(names) > obs.rank:
         # the data, not the robot's structure, limit what can be seen
@@ -291,8 +293,8 @@ def check_analysis(full: Problem) -> Observability:
     return obs
 
 
-def _problem(make, point, names, settings: Settings, weights) -> Problem:
-    problem = make(point, names=names)
+def _problem(make, point, names, settings: Settings, weights, kernel_names=None) -> Problem:
+    problem = make(point, names=names, kernel_names=kernel_names)
     return problem if settings.loss == "linear" else problem.reweighted(weights)
 
 
@@ -372,14 +374,12 @@ def _robust_sd(e: np.ndarray) -> float:
 def workspace_jacobian(point: Robot, q_work, names, full: Problem) -> np.ndarray:
     """Unweighted Jacobian of the measured points at workspace poses, (3 n, k), m/unit.
 
-    At `q_work` (poses spread within the joint limits) when there are any, else at the
-    measured poses.
+    At `q_work` (poses spread within the joint limits) when there are any, else at up to
+    `WORKSPACE_POSES` of the measured poses, evenly spread through the data.
     """
     if q_work is None:
-        n, rows = full.w_rows.shape
-        point_rows = 3 * full.m
-        J = full.jacobian(np.zeros(len(names))).reshape(n, rows, -1)
-        return (J[:, :point_rows, :] / full.w_rows[:, :point_rows, None]).reshape(-1, len(names))
+        n = len(full.q)
+        q_work = full.q[np.unique(np.linspace(0, n - 1, min(n, WORKSPACE_POSES)).astype(int))]
     chain = full.chain
     J = chain.evaluate("points_jacobian", q_work, point.vector(), full.kernel_columns)
     return J.reshape(-1, J.shape[-1])[:, full.take]

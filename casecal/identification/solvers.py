@@ -19,7 +19,7 @@ from .problem import Problem
 
 def _svd(problem: Problem, x0, callback=None, **_):
     r0 = problem.residual(x0)
-    x = x0 + svd_solve(problem.jacobian(x0), r0)
+    x = x0 + svd_solve(problem.reduced(x0, r0))
     r1 = problem.residual(x)
     return x, 1, 1, [0.5 * r0 @ r0, 0.5 * r1 @ r1], None
 
@@ -70,8 +70,8 @@ def _variance(problem: Problem, cost: float) -> float:
 def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
     for it in range(1, max_iterations + 1):
-        J = problem.jacobian(x)
-        step, predicted = gauss_newton_step(J, r)
+        linear = problem.reduced(x, r)
+        step, predicted = gauss_newton_step(linear)
         done = _converged(predicted, cost, tolerance, floor)
         t = 1.0
         while True:  # halve the step until the cost goes down (damped Gauss-Newton)
@@ -82,7 +82,7 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
                 break
             t *= 0.5
         if cost_new < cost:
-            norms = np.linalg.norm(J, axis=0)
+            norms = linear.norms
             small = np.linalg.norm(t * step * norms) <= tolerance * (
                 np.linalg.norm(x * norms) + tolerance
             )
@@ -106,14 +106,14 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
 
 def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
-    J = problem.jacobian(x)
-    norms = np.linalg.norm(J, axis=0)
+    linear = problem.reduced(x, r)
+    norms = linear.norms
     norms[norms == 0] = 1.0
     mu, nu, stalls = None, 2.0, 0
     for it in range(1, max_iterations + 1):
-        Js = J / norms  # work in scaled variables z = x * norms
-        A = Js.T @ Js
-        g = Js.T @ r
+        Rs = linear.R / norms  # work in scaled variables z = x * norms
+        A = Rs.T @ Rs  # JᵀJ and Jᵀr from the R factor of [J | r]
+        g = Rs.T @ linear.Qtr
         # the undamped step's predicted decrease, from the normal equations: a
         # convergence test only, so their squared condition number does no harm
         h_gn = np.linalg.lstsq(A, g, rcond=1e-12)[0]
@@ -147,7 +147,7 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callba
                 return x, it, 4, history, None
             if small or stalls >= 3:  # three steps in a row that change nothing visible
                 return x, it, 2, history, None
-            J = problem.jacobian(x)
+            linear = problem.reduced(x, r)
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
         else:
@@ -163,31 +163,30 @@ class _LeastSquares:
     """Objective ``0.5 (|r(z)|² + |w_p z|²) / scale``, its gradient and Gauss-Newton Hessian.
 
     ``z = x · norms`` are the column-scaled deviations; ``w_p`` the prior's weights, the
-    prior centred on nominal, ``z_0`` from the start of this fit. The Jacobian at the last
-    point is kept, since IPOPT asks for gradient and Hessian at the same point.
+    prior centred on nominal, ``z_0`` from the start of this fit. The reduction at the last
+    point is memoised by the problem, since IPOPT asks for gradient and Hessian there.
     """
 
     def __init__(self, problem: Problem, norms, scale, prior_w, z0):
         self.problem, self.norms, self.scale, self.prior_w = problem, norms, scale, prior_w
         self.z0 = z0
-        self._at, self._J = None, None
 
-    def _jacobian(self, z):
-        if self._at is None or not np.array_equal(z, self._at):
-            self._at, self._J = z.copy(), self.problem.jacobian(z / self.norms) / self.norms
-        return self._J
+    def _scaled(self, z):
+        """(R / norms, Qᵀr) of the weighted ``[J | r]`` at `z` (memoised by the problem)."""
+        linear = self.problem.reduced(z / self.norms)
+        return linear.R / self.norms, linear.Qtr
 
     def value(self, z):
         r = self.problem.residual(z / self.norms)
         return 0.5 * (r @ r + np.sum((self.prior_w * (z + self.z0)) ** 2)) / self.scale
 
     def gradient(self, z):
-        r = self.problem.residual(z / self.norms)
-        return (-self._jacobian(z).T @ r + self.prior_w**2 * (z + self.z0)) / self.scale
+        Rs, Qtr = self._scaled(z)  # Jᵀr = Rᵀ Qᵀr
+        return (-Rs.T @ Qtr + self.prior_w**2 * (z + self.z0)) / self.scale
 
     def hessian(self, z):
-        J = self._jacobian(z)
-        return (J.T @ J + np.diag(self.prior_w**2)) / self.scale
+        Rs, _ = self._scaled(z)
+        return (Rs.T @ Rs + np.diag(self.prior_w**2)) / self.scale
 
 
 class _Callback(ca.Callback):
@@ -245,9 +244,9 @@ def _ipopt(
                 f"bounds/prior name {name!r} is not among the estimated parameters "
                 f"({', '.join(problem.names)})"
             )
-    norms = np.linalg.norm(problem.jacobian(x0), axis=0)
-    norms[norms == 0] = 1.0
     r0 = problem.residual(x0)
+    norms = problem.reduced(x0, r0).norms
+    norms[norms == 0] = 1.0
     scale = max(0.5 * r0 @ r0, floor_cost(problem))
     sig = np.array([prior.get(name, np.inf) for name in problem.names])
     prior_w = np.where(np.isfinite(sig), 1.0 / sig, 0.0) / norms  # per z

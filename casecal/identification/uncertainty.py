@@ -4,17 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .linalg import nr_threshold, triangular
+from .linalg import Reduction, nr_threshold
 
 
-def covariance(J: np.ndarray, r: np.ndarray, known: bool, prior_w=None) -> np.ndarray:
+def covariance(J, r, known: bool, prior_w=None) -> np.ndarray:
     """``(JᵀJ + W_p²)⁻¹`` of the weighted Jacobian `J` and prior weights ``W_p = 1/σ_p``.
 
     Parameters
     ----------
-    J : ndarray, shape (rows, k)
-        Jacobian of the weighted residuals (rows divided by their σ when it is known).
-    r : ndarray, shape (rows,)
+    J : ndarray, shape (rows, k), or Reduction
+        Jacobian of the weighted residuals (rows divided by their σ when it is known), or
+        the `Reduction` of it and the residuals (then `r` is None).
+    r : ndarray, shape (rows,), or None
         Weighted residuals at the solution.
     known : bool
         Whether the weights are 1/σ. If not, the covariance is scaled by the residual
@@ -26,27 +27,29 @@ def covariance(J: np.ndarray, r: np.ndarray, known: bool, prior_w=None) -> np.nd
     ndarray, shape (k, k)
         In the units of the parameters (m², m·rad, rad²).
     """
-    k = J.shape[1]
+    red = J if isinstance(J, Reduction) else Reduction.of(J, r)
+    k = red.k
     if k == 0:
         return np.zeros((0, 0))
+    data = red
     if prior_w is not None and np.any(prior_w > 0):
-        J = np.vstack([J, np.diag(prior_w)])
-    norms = np.linalg.norm(J, axis=0)
+        red = red.fold(np.diag(prior_w), np.zeros(k))
+    norms = red.norms
     norms[norms == 0] = 1.0
-    _, s, Vt = np.linalg.svd(triangular(J / norms)[0], full_matrices=False)
-    keep = s > nr_threshold(s, J.shape)
+    _, s, Vt = np.linalg.svd(red.R / norms, full_matrices=False)
+    keep = s > nr_threshold(s, (red.rows, k))
     inv = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
     cov = inv / np.outer(norms, norms)
     if not known:
-        dof = r.size - k
-        cov = cov * (float(r @ r) / dof if dof > 0 else np.nan)
+        dof = data.rows - k
+        cov = cov * (data.rr / dof if dof > 0 else np.nan)
     return cov
 
 
 def uncertainty(J, r, known: bool, names, estimated, prior_w=None) -> tuple[np.ndarray, dict]:
     """Covariance of the estimated deviations and standard errors of all asked-for names
     (NaN for those held), from the weighted Jacobian `J` of `estimated` and residuals `r`
-    at the solution (see `covariance`)."""
+    at the solution, or their `Reduction` (see `covariance`)."""
     cov = covariance(J, r, known, prior_w)
     se = dict.fromkeys(names, float("nan"))
     se.update(zip(estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))

@@ -45,6 +45,7 @@ from functools import cache
 import casadi as ca
 import numpy as np
 
+from .._threads import cores, thread_map
 from . import _native
 from .chainwalk import walk
 from .parameters import parameter_names, urdf_parameter_names
@@ -61,6 +62,9 @@ HOT_CALLS = 100
 """Smaller batches of one chain and output kind, in one process, after which they too use
 compiled C: one kernel of every parameter column, its columns taken in numpy, so that the
 many column sets of repeated fits (a study's trials) share one compile per machine."""
+
+PARALLEL_POSES = 8192
+"""Batches of at least twice this many poses are split over threads (`thread_map`)."""
 
 KINDS = (
     "fk",
@@ -272,18 +276,6 @@ class Chain:
             return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
         T = walk(structure, base, q_eff, P, trig).T
         return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
-        for i, jt in enumerate(structure.joint_types, start=1):
-            T = T @ link_transform(
-                structure.convention,
-                jt,
-                q[i - 1],
-                P[f"theta{i}"],
-                P[f"d{i}"],
-                P[f"a{i}"],
-                trig[f"alpha{i}"],
-                trig.get(f"beta{i}"),
-            )
-        return q, p, cos, sin, ca.vertcat(p, cos, sin), T @ frame("tool")
 
     def extended(self, p: np.ndarray) -> np.ndarray:
         """The graph's input: `p` followed by cos and sin of its constant angles."""
@@ -455,7 +447,14 @@ class _Evaluator:
         n = q.shape[0]
         if self._use_native(n, p.size):
             out = np.empty((n, *self.shape))
-            self._native(q, p, out)
+            # the C loop releases the GIL: large batches run on every core, in chunks
+            parts = max(min(n // PARALLEL_POSES, cores()), 1)
+            bounds = np.linspace(0, n, parts + 1).astype(int)
+
+            def run(i: int) -> None:
+                self._native(q[bounds[i] : bounds[i + 1]], p, out[bounds[i] : bounds[i + 1]])
+
+            thread_map(run, list(range(parts)))
             return out
         # CasADi evaluates all N poses in one call when q has N times the expected columns;
         # its output is the horizontal concatenation of the transposed per-pose outputs

@@ -145,7 +145,9 @@ class Executor:
 
 
 def _worker_start() -> None:
-    """Each worker: one BLAS thread for its whole life (they share the machine's cores)."""
+    """Each worker: one BLAS thread and no kernel threads for its whole life (the workers
+    already share the machine's cores)."""
+    os.environ["CASECAL_THREADS"] = "1"
     try:
         from threadpoolctl import threadpool_limits
 
