@@ -64,12 +64,38 @@ def thread_map(func, items: list) -> list:
     BLAS's own do, and a busy machine costs no more than the serial loop. The pool is
     created on first use and kept (threads only, no memory held between calls).
     """
+    pool = _pool() if len(items) > 1 else None
+    if pool is None:
+        return [func(item) for item in items]
+    return list(pool.map(functools.partial(_inside, func), items))
+
+
+def prefetched(func, items: list):
+    """Yield ``func(item)`` for `items` in order, computing the next in a thread while
+    the caller works on this one: a two-stage pipeline, e.g. kernels evaluating the next
+    batch of poses while LAPACK folds this one (LAPACK stays in one thread: OpenBLAS
+    called from two threads at once contends for its buffers)."""
+    pool = _pool()
+    if pool is None:
+        yield from (func(item) for item in items)
+        return
+    call = functools.partial(_inside, func)
+    ahead = pool.submit(call, items[0]) if items else None
+    for i in range(len(items)):
+        value = ahead.result()
+        ahead = pool.submit(call, items[i + 1]) if i + 1 < len(items) else None
+        yield value
+
+
+def _pool() -> ThreadPoolExecutor | None:
+    """The shared thread pool, or None where threads would not help (one core, or a pool
+    thread itself, which must not wait on the pool: deadlock)."""
     global _POOL
-    if len(items) < 2 or cores() < 2 or getattr(_INSIDE, "pool", False):
-        return [func(item) for item in items]  # a pool thread waiting on the pool: deadlock
+    if cores() < 2 or getattr(_INSIDE, "pool", False):
+        return None
     if _POOL is None or _POOL[0] != os.getpid():
         _POOL = (os.getpid(), ThreadPoolExecutor(cores(), thread_name_prefix="casecal"))
-    return list(_POOL[1].map(functools.partial(_inside, func), items))
+    return _POOL[1]
 
 
 _INSIDE = threading.local()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._threads import prefetched
 from ..model import kinematics
 from ..model.frames import rotation_vector
 from ..model.robot import Robot
@@ -170,14 +171,16 @@ class Problem:
         return whole.columns(self.take)
 
     def _reduce(self, p: np.ndarray, r: np.ndarray) -> Reduction:
-        # one thread: LAPACK called from two threads at once contends for OpenBLAS's
-        # buffers and was slower than one (0.32 s against 0.27 s per 1e5 poses)
         n, per_pose = len(self.q), self.w_rows.shape[1]
+        batches = [
+            slice(b[0], b[-1] + 1) for b in np.array_split(np.arange(n), max(n // BATCH_POSES, 1))
+        ]
         red = Reduction.empty(len(self.kernel_columns))
-        for poses in np.array_split(np.arange(n), max(n // BATCH_POSES, 1)):
-            sl = slice(poses[0], poses[-1] + 1)
-            rows = slice(sl.start * per_pose, sl.stop * per_pose)
-            red = red.fold(self._kernel_rows(p, sl), r[rows])
+        # the kernels evaluate the next batch in a thread while this one is folded here
+        for sl, J in zip(
+            batches, prefetched(lambda sl: self._kernel_rows(p, sl), batches), strict=True
+        ):
+            red = red.fold(J, r[sl.start * per_pose : sl.stop * per_pose])
         return red
 
     def _kernel_rows(self, p: np.ndarray, poses: slice) -> np.ndarray:

@@ -1,0 +1,98 @@
+"""Identification at scale: memory that does not grow with the pose count, answers that do
+not change when the Jacobian is streamed in batches, threads that stay out of each other's
+way. Nothing here is timed (benchmarks/bench_scale.py measures speed)."""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+import casecal as cc
+from casecal._threads import thread_map
+from casecal.identification import problem as problem_module
+from casecal.identification.linalg import Reduction
+
+
+def _peak_bytes(robot, n: int) -> int:
+    """Peak bytes allocated (numpy and Python) during `identify` of n poses, "all"."""
+    q = cc.poses.uniform(robot, n, seed=0)
+    meas = cc.simulate(robot.with_deviations({"a2": 1e-4, "d3": -2e-4}), q, noise=2e-5, seed=1)
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        cal = cc.identify(robot, meas, "all")
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    assert cal.success, cal.message
+    return peak
+
+
+def test_peak_memory_grows_like_the_measurements_not_the_jacobian():
+    robot = cc.load_robot("puma560")
+    _peak_bytes(robot, 2000)  # kernels loaded, caches warm
+    small, large = 16000, 64000
+    per_pose = (_peak_bytes(robot, large) - _peak_bytes(robot, small)) / (large - small)
+    k = len(robot.parameter_names)
+    jacobian = 3 * k * 8  # one whole Jacobian, B per pose (888 for the PUMA's 37)
+    inputs = (6 + 3 + 3) * 8  # joint values, measured point and its sigma, B per pose
+    # residuals, weights and the memoised points are each the size of the measured
+    # points; the Jacobian itself never exists whole (before: 4 copies, 3.5 kB/pose)
+    assert per_pose <= 5 * inputs, (per_pose, inputs)
+    assert per_pose < 0.6 * jacobian, (per_pose, jacobian)
+
+
+@pytest.fixture
+def tiny_batches(monkeypatch):
+    monkeypatch.setattr(problem_module, "BATCH_POSES", 7)
+
+
+def test_streamed_fit_equals_one_batch(tiny_batches):
+    """The same fit whether the Jacobian is folded 7 poses at a time or whole."""
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 300, seed=3)
+    truth = {"a2": 2e-4, "d3": -1e-4, "alpha3": 3e-4, "theta4": -2e-4}
+    meas = cc.simulate(robot.with_deviations(truth), q, noise=2e-5, seed=4)
+    streamed = cc.identify(robot, meas, ["theta*", "a*", "d*", "alpha*"])
+    problem_module.BATCH_POSES = 10**9
+    whole = cc.identify(robot, meas, ["theta*", "a*", "d*", "alpha*"])
+    assert streamed.success and whole.success
+    assert streamed.estimated == whole.estimated
+    for name in whole.estimated:
+        assert streamed.deviations[name] == pytest.approx(whole.deviations[name], abs=1e-12)
+        assert streamed.standard_errors[name] == pytest.approx(
+            whole.standard_errors[name], rel=1e-9
+        )
+
+
+def test_reduction_keeps_what_the_tall_system_holds():
+    """Folded in pieces, R and Qᵀr give lstsq's answer, the residual and the singular
+    values of the tall system, also for a blind (rank-deficient) column pair."""
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(500, 6)) * [1.0, 1e3, 1e-3, 1.0, 1.0, 1.0]
+    J[:, 5] = 2.0 * J[:, 0]  # blind: only theta-like column 0 + 2 * column 5 is seen
+    r = rng.normal(size=500)
+    red = Reduction.of(J[:123], r[:123]).merge(Reduction.of(J[123:400], r[123:400]))
+    red = red.fold(J[400:], r[400:])
+    assert red.rows == 500 and red.rr == pytest.approx(r @ r)
+    s_tall = np.linalg.svd(J, compute_uv=False)
+    s_red = np.linalg.svd(red.R, compute_uv=False)
+    assert s_red[:5] == pytest.approx(s_tall[:5], rel=1e-12)
+    assert s_red[5] < 1e-12 * s_red[0]  # the blind direction stays at rounding
+    x = np.linalg.lstsq(J, r, rcond=1e-12)[0]
+    step, decrease = red.solve()
+    assert J @ step == pytest.approx(J @ x, abs=1e-9)
+    rest = r - J @ x
+    assert decrease == pytest.approx(0.5 * (r @ r - rest @ rest), rel=1e-9)
+    sub = red.columns([1, 3])
+    x13 = np.linalg.lstsq(J[:, [1, 3]], r, rcond=None)[0]
+    assert sub.solve()[0] == pytest.approx(x13, rel=1e-10)
+
+
+def test_thread_map_keeps_order_and_does_not_deadlock_when_nested():
+    def inner(i):
+        return sum(thread_map(lambda j: i * j, list(range(5))))
+
+    assert thread_map(inner, list(range(8))) == [10 * i for i in range(8)]
