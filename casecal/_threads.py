@@ -24,9 +24,12 @@ def one_blas_thread():
     global _CONTROLLER
     try:
         if _CONTROLLER is None:
+            import scipy.linalg  # noqa: F401  its own OpenBLAS, loaded before inspection
             from threadpoolctl import ThreadpoolController
 
-            _CONTROLLER = ThreadpoolController()  # inspecting the pools once costs ms
+            # inspecting the pools costs ms: once, after every BLAS casecal calls is loaded
+            # (a library loaded later would keep a thread per core and spin)
+            _CONTROLLER = ThreadpoolController()
         return _CONTROLLER.limit(limits=1)
     except ImportError:  # threadpoolctl is a dependency; a broken install still works
         return nullcontext()
@@ -75,7 +78,7 @@ def prefetched(func, items: list):
     the caller works on this one: a two-stage pipeline, e.g. kernels evaluating the next
     batch of poses while LAPACK folds this one (LAPACK stays in one thread: OpenBLAS
     called from two threads at once contends for its buffers)."""
-    pool = _pool()
+    pool = _pool() if len(items) > 1 else None
     if pool is None:
         yield from (func(item) for item in items)
         return

@@ -148,6 +148,8 @@ def _worker_start() -> None:
     """Each worker: one BLAS thread and no kernel threads for its whole life (the workers
     already share the machine's cores)."""
     os.environ["CASECAL_THREADS"] = "1"
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = "1"  # for BLAS libraries loaded later
     try:
         from threadpoolctl import threadpool_limits
 
