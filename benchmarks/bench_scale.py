@@ -13,8 +13,12 @@ Then 1,000 poses: the best and median of repeated fits idle, and again beside tw
 processes (numpy matrix products with the default BLAS threads, as other work on the
 machine would run).
 
+Without a C compiler (``CASECAL_BACKEND=numpy``) the same fit evaluates the CasADi
+instruction lists with numpy, vectorised over the poses.
+
 Targets (issue 13): 1e6 poses <= 5 s and <= 1 GiB for theta/a/d/alpha, "all" <= 10 s and
-<= 1 GiB; at 1e5, casecal <= 0.5x the numpy reference; 1,000 poses busy <= 1.5x idle.
+<= 1 GiB; at 1e5, casecal <= 0.5x the numpy reference; without a compiler <= 2x numpy at
+1e4; 1,000 poses busy <= 1.5x idle.
 
 Run: python benchmarks/bench_scale.py [--sizes 1e4 1e5 1e6] [--numpy-max 1e6] [--no-busy]
 """
@@ -86,9 +90,10 @@ def child(what: str, data: str) -> None:
     print(f"{t} {rss} {ok}")
 
 
-def run_child(what: str, data: str) -> tuple[float, float, str]:
+def run_child(what: str, data: str, backend: str = "auto") -> tuple[float, float, str]:
     cmd = [sys.executable, __file__, "--child", what, "--data", data]
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout.split()
+    env = {**os.environ, "CASECAL_BACKEND": backend}
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env).stdout.split()
     return float(out[-3]), float(out[-2]), out[-1]
 
 
@@ -153,7 +158,10 @@ def main():
     folder = tempfile.mkdtemp(prefix="casecal-bench-scale-")
     os.environ.setdefault("CASECAL_CACHE", str(Path(folder) / "kernels"))
     print("PUMA 560, sigma 0.02 mm, Gauss-Newton; each fit a new process (time: s, peak RSS: MiB)")
-    print(f"{'poses':>9} | {'theta/a/d/alpha':>17} | {'all':>17} | {'numpy GN':>15} | ratio")
+    print(
+        f"{'poses':>9} | {'theta/a/d/alpha':>17} | {'all':>17} | {'numpy GN':>15} | ratio | "
+        f"{'no compiler':>17} | ratio"
+    )
     warm = make_data(2000, folder)
     for what in ("dh", "all"):
         run_child(what, warm)  # compile the kernels once, outside the timings
@@ -162,12 +170,18 @@ def main():
         t_dh, m_dh, ok_dh = run_child("dh", data)
         t_all, m_all, ok_all = run_child("all", data)
         t_np, m_np = (run_child("numpy", data)[:2]) if n <= args.numpy_max else (np.nan, np.nan)
+        # without a C compiler: the instruction lists evaluated by numpy
+        t_nc, m_nc, ok_nc = run_child("dh", data, "numpy") if n <= 1e5 else (np.nan, np.nan, "")
         print(
             f"{n:9d} | {t_dh:6.2f} s {m_dh:5.0f} {ok_dh:>2} | {t_all:6.2f} s {m_all:5.0f} "
-            f"{ok_all:>2} | {t_np:6.2f} s {m_np:5.0f} | {t_dh / t_np:5.2f}x"
+            f"{ok_all:>2} | {t_np:6.2f} s {m_np:5.0f} | {t_dh / t_np:4.2f}x | "
+            f"{t_nc:6.2f} s {m_nc:5.0f} {ok_nc:>2} | {t_nc / t_np:4.2f}x"
         )
         Path(data).unlink()
-    print("  ratio: casecal theta/a/d/alpha time / numpy time (target <= 0.5x at 1e5)")
+    print(
+        "  ratios: casecal theta/a/d/alpha time / numpy time (target <= 0.5x at 1e5); "
+        "no compiler (CASECAL_BACKEND=numpy) / numpy (target <= 2x at 1e4)"
+    )
     if not args.no_busy:
         busy_ratio(args.repeat)
 

@@ -5,6 +5,7 @@ way. Nothing here is timed (benchmarks/bench_scale.py measures speed)."""
 from __future__ import annotations
 
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -96,3 +97,53 @@ def test_thread_map_keeps_order_and_does_not_deadlock_when_nested():
         return sum(thread_map(lambda j: i * j, list(range(5))))
 
     assert thread_map(inner, list(range(8))) == [10 * i for i in range(8)]
+
+
+def _robots_for_backends():
+    from test_terms import MARKER, heavy
+
+    examples = Path(__file__).parents[1] / "examples"
+    return {
+        "dh": cc.load_robot("puma560"),
+        "mdh-points": cc.load_robot("rx90b_mdh").with_points(MARKER),
+        "dh-compliance-harmonics": heavy().with_compliance([2, 3]).with_joint_harmonics(2, 2),
+        "urdf-lumped": cc.load_robot(examples / "kr16_2.urdf").with_compliance([2, 3]),
+        "prismatic": cc.load_robot("scara"),
+    }
+
+
+@pytest.mark.parametrize("name", list(_robots_for_backends()))
+def test_numpy_evaluation_without_a_compiler_equals_casadi(name, monkeypatch):
+    """The instruction list run by numpy over all poses gives CasADi's numbers, for every
+    output the identification uses."""
+    from casecal.model import kinematics
+
+    robot = _robots_for_backends()[name]
+    robot = robot.with_deviations({n: 1e-4 for n in robot.parameter_names[:5]})
+    q = cc.poses.uniform(robot, 300, seed=1)
+    chain = kinematics.chain(robot.structure)
+    every = chain.columns(None)
+    for kind in ("fk", "points", "points_jacobian", "pose_jacobian"):
+        columns = every if kind.endswith("jacobian") else ()
+        monkeypatch.setenv("CASECAL_BACKEND", "casadi")
+        reference = chain._evaluator(kind, columns)(q, chain.extended(robot.vector()))
+        monkeypatch.setenv("CASECAL_BACKEND", "numpy")
+        got = kinematics._Evaluator(chain, kind, columns)(q, chain.extended(robot.vector()))
+        assert got.shape == reference.shape
+        np.testing.assert_allclose(got, reference, rtol=1e-13, atol=1e-15, err_msg=kind)
+
+
+def test_identify_without_a_compiler_gives_the_compiled_answer(monkeypatch):
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 400, seed=5)
+    meas = cc.simulate(robot.with_deviations({"a2": 2e-4, "d3": -1e-4}), q, noise=2e-5, seed=6)
+    compiled = cc.identify(robot, meas, ["theta*", "a*", "d*", "alpha*"])
+    monkeypatch.setenv("CASECAL_BACKEND", "numpy")
+    from casecal.model import kinematics
+
+    kinematics.chain.cache_clear()  # evaluators are made anew under the numpy backend
+    vectorised = cc.identify(robot, meas, ["theta*", "a*", "d*", "alpha*"])
+    kinematics.chain.cache_clear()
+    assert vectorised.success and vectorised.estimated == compiled.estimated
+    for name in compiled.estimated:
+        assert vectorised.deviations[name] == pytest.approx(compiled.deviations[name], abs=1e-12)

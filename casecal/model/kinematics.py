@@ -46,7 +46,7 @@ import casadi as ca
 import numpy as np
 
 from .._threads import cores, thread_map
-from . import _native
+from . import _native, _vectorised
 from .chainwalk import walk
 from .parameters import parameter_names, urdf_parameter_names
 
@@ -436,6 +436,8 @@ class _Evaluator:
         self._function = None
         self._native = None
         self._native_tried = False
+        self._vectorised_fn = None
+        self._vectorised_tried = False
 
     @property
     def function(self) -> ca.Function:
@@ -456,6 +458,9 @@ class _Evaluator:
 
             thread_map(run, list(range(parts)))
             return out
+        vectorised = self._vectorised(n)
+        if vectorised is not None:  # no compiler: numpy over all poses at once
+            return vectorised(q, p).reshape(n, *self.shape)
         # CasADi evaluates all N poses in one call when q has N times the expected columns;
         # its output is the horizontal concatenation of the transposed per-pose outputs
         res = np.asarray(self.function(q.T, p), dtype=float)
@@ -471,9 +476,22 @@ class _Evaluator:
         self._native(q, p, out)
         return out
 
-    def _use_native(self, n: int, n_p: int) -> bool:
+    def _vectorised(self, n: int):
+        """The numpy evaluator of the instruction list (`_vectorised`) where it serves."""
         backend = os.environ.get("CASECAL_BACKEND", "auto")
         if backend == "casadi" or (backend == "auto" and n < COMPILE_MIN_POSES):
+            return None
+        if not self._vectorised_tried:
+            self._vectorised_tried = True
+            try:
+                self._vectorised_fn = _vectorised.Vectorised(self.function)
+            except _vectorised.Unsupported as exc:
+                log.info("numpy evaluation of %s unavailable (%s); using CasADi's", self.kind, exc)
+        return self._vectorised_fn
+
+    def _use_native(self, n: int, n_p: int) -> bool:
+        backend = os.environ.get("CASECAL_BACKEND", "auto")
+        if backend in ("casadi", "numpy") or (backend == "auto" and n < COMPILE_MIN_POSES):
             return False
         if not self._native_tried:
             self._native_tried = True
