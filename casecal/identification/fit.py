@@ -251,8 +251,16 @@ def _shared(make):
     def shared(robot, names, kernel_names=None, **other):
         if other:
             return make(robot, names=names, kernel_names=kernel_names, **other)
-        key = (robot.structure, robot.vector().tobytes(), tuple(names), tuple(kernel_names or ()))
-        problem = kept.pop(key, None) or make(robot, names=names, kernel_names=kernel_names)
+        at = (robot.structure, robot.vector().tobytes(), tuple(names))
+        key = (*at, tuple(kernel_names or names))
+        problem = kept.pop(key, None)
+        if problem is None:
+            same = [p for k, p in kept.items() if k[:3] == at]  # other columns, same point
+            problem = (
+                same[-1].with_kernel(key[3])
+                if same
+                else make(robot, names=names, kernel_names=kernel_names)
+            )
         kept[key] = problem  # the latest last
         while len(kept) > SHARED_PROBLEMS:
             kept.pop(next(iter(kept)))

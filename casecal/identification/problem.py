@@ -162,13 +162,33 @@ class Problem:
             Of the columns `names`, with ``rows`` the N · rows-per-pose residuals.
         """
         p = self.p(x)
-        whole = self._memoised(
-            ("reduced", p.tobytes(), self._weights),
-            lambda: self._reduce(p, self.residual(x) if r is None else r),
-        )
+        at = ("reduced", p.tobytes(), self._weights)
+        whole = self._memo.get((*at, self.kernel_columns)) or self._from_wider(at)
+        if whole is None:
+            whole = self._memoised(
+                (*at, self.kernel_columns),
+                lambda: self._reduce(p, self.residual(x) if r is None else r),
+            )
         if len(self.take) == whole.k and self.take == list(range(whole.k)):
             return whole
         return whole.columns(self.take)
+
+    def _from_wider(self, at: tuple) -> Reduction | None:
+        """A memoised reduction at the same point whose kernel covers this one's columns."""
+        need = self.kernel_columns
+        for key, value in self._memo.items():
+            if key[:3] == at and set(need) <= set(key[3]):
+                return value.columns([key[3].index(c) for c in need])
+        return None
+
+    def with_kernel(self, kernel_names) -> Problem:
+        """The same problem evaluating the columns `kernel_names` (a superset of `names`),
+        sharing the memo: a reduction of wider columns serves it without a new pass."""
+        other = self.restricted(self.names)
+        other.kernel_columns = self.chain.columns(tuple(kernel_names))
+        kernel = [self.chain.names[c] for c in other.kernel_columns]
+        other.take = [kernel.index(n) for n in other.names]
+        return other
 
     def _reduce(self, p: np.ndarray, r: np.ndarray) -> Reduction:
         n, per_pose = len(self.q), self.w_rows.shape[1]
