@@ -74,19 +74,20 @@ def thread_map(func, items: list) -> list:
 
 
 def prefetched(func, items: list):
-    """Yield ``func(item)`` for `items` in order, computing the next in a thread while
-    the caller works on this one: a two-stage pipeline, e.g. kernels evaluating the next
-    batch of poses while LAPACK folds this one (LAPACK stays in one thread: OpenBLAS
-    called from two threads at once contends for its buffers)."""
+    """Yield ``func(item)`` for `items` in order, computed ahead in `cores` threads while
+    the caller works on the current one: a pipeline, e.g. kernels evaluating the next
+    batches of poses while LAPACK folds this one (LAPACK stays in the caller's thread:
+    OpenBLAS called from two threads at once contends for its buffers)."""
     pool = _pool() if len(items) > 1 else None
     if pool is None:
         yield from (func(item) for item in items)
         return
     call = functools.partial(_inside, func)
-    ahead = pool.submit(call, items[0]) if items else None
+    ahead = [pool.submit(call, item) for item in items[: cores()]]
     for i in range(len(items)):
-        value = ahead.result()
-        ahead = pool.submit(call, items[i + 1]) if i + 1 < len(items) else None
+        value = ahead.pop(0).result()
+        if i + cores() < len(items):
+            ahead.append(pool.submit(call, items[i + cores()]))
         yield value
 
 

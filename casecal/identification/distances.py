@@ -182,7 +182,7 @@ class _DistanceProblem:
         Jd = np.einsum("pi,pik->pk", u, J[self.m.pairs[:, 0]] - J[self.m.pairs[:, 1]])
         return Jd * self.w_flat[:, None]
 
-    def reduced(self, x, r=None) -> Reduction:
+    def reduced(self, x, r=None, exact=True) -> Reduction:
         """The weighted ``[J | r]`` at `x` as the solvers take it (pairs are few: whole)."""
         return Reduction.of(self.jacobian(x), self.residual(x) if r is None else r)
 

@@ -74,6 +74,28 @@ class Reduction:
         """The reduction of a tall `J` (rows × k) and `r` (rows,)."""
         return cls.empty(J.shape[1]).fold(J, r)
 
+    @classmethod
+    def from_normal(cls, G: np.ndarray, g: np.ndarray, rr: float, rows: int) -> Reduction | None:
+        """The reduction with ``RᵀR = G = JᵀJ`` and ``Rᵀ Qᵀr = g = Jᵀr`` (Cholesky of the
+        column-scaled G), or None where the normal equations would lose too much.
+
+        Forming G squares the condition number, so this is offered only where the scaled
+        J's is at most `NORMAL_CONDITION` (a step then keeps six or more digits): for the
+        steps of the iterated solvers, whose every judgement is made again on a QR pass.
+        """
+        d = np.sqrt(np.diag(G))
+        if not d.size or np.any(d <= ZERO_COLUMN * d.max()):
+            return None  # a zero column: the analysis's business, on a QR pass
+        Gs = G / np.outer(d, d)
+        eig = np.linalg.eigvalsh(Gs)
+        if eig[0] <= eig[-1] / NORMAL_CONDITION**2:
+            return None
+        try:
+            L = np.linalg.cholesky(Gs)
+        except np.linalg.LinAlgError:
+            return None
+        return cls(L.T * d, np.linalg.solve(L, g / d), float(rr), int(rows))
+
     @property
     def k(self) -> int:
         return self.R.shape[1]
@@ -127,6 +149,11 @@ class Reduction:
         proj = U[:, keep].T @ self.Qtr
         z = Vt[keep].T @ (proj / s[keep])
         return z / norms, 0.5 * float(proj @ proj)
+
+
+NORMAL_CONDITION = 1e5
+"""Largest condition number of the column-scaled Jacobian for which a solver's step may
+come from the normal equations (`Reduction.from_normal`): their 1e10 leaves six digits."""
 
 
 def _r_factor(A: np.ndarray) -> np.ndarray:

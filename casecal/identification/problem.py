@@ -21,7 +21,7 @@ from .linalg import Reduction
 BATCH_POSES = 4096
 """Poses per batch of `Problem.reduced`: a batch's Jacobian (3 · 4096 × k) stays in cache."""
 
-MEMO = 4
+MEMO = 6
 """Evaluations kept per problem: residuals are O(N), reductions O(k²)."""
 
 
@@ -147,7 +147,7 @@ class Problem:
         J = self._kernel_rows(self.p(x), slice(None))
         return J[:, self.take] if len(self.take) != J.shape[1] else J
 
-    def reduced(self, x: np.ndarray, r: np.ndarray | None = None) -> Reduction:
+    def reduced(self, x: np.ndarray, r: np.ndarray | None = None, exact=True) -> Reduction:
         """The weighted ``[J | r]`` at `x`, reduced to its R factor batch by batch.
 
         Parameters
@@ -155,6 +155,11 @@ class Problem:
         x : ndarray, shape (k,)
         r : ndarray, optional
             `residual` at `x`, when the caller has it.
+        exact : bool
+            True: Householder QR of the batches, for every judgement (rank, covariance,
+            audit). False, for a solver's step: the normal equations ``JᵀJ``, ``Jᵀr``
+            accumulated by BLAS-3 (four times faster), where the scaled condition number
+            allows (`Reduction.from_normal`), else QR.
 
         Returns
         -------
@@ -164,6 +169,14 @@ class Problem:
         p = self.p(x)
         at = ("reduced", p.tobytes(), self._weights)
         whole = self._memo.get((*at, self.kernel_columns)) or self._from_wider(at)
+        if whole is None and not exact:
+            r = self.residual(x) if r is None else r
+            key = ("normal", *at[1:], self.kernel_columns)
+            G, g = self._memoised(key, lambda: self._normal(p, r))
+            take = self.take
+            step = Reduction.from_normal(G[np.ix_(take, take)], g[take], r @ r, r.size)
+            if step is not None:
+                return step
         if whole is None:
             whole = self._memoised(
                 (*at, self.kernel_columns),
@@ -190,18 +203,31 @@ class Problem:
         other.take = [kernel.index(n) for n in other.names]
         return other
 
-    def _reduce(self, p: np.ndarray, r: np.ndarray) -> Reduction:
+    def _batches(self, p: np.ndarray):
+        """``(J, rows)`` per batch of poses: the weighted Jacobian rows and their slice of
+        the residual vector. The kernels evaluate the next batch in a thread while the
+        caller reduces this one."""
         n, per_pose = len(self.q), self.w_rows.shape[1]
-        batches = [
-            slice(b[0], b[-1] + 1) for b in np.array_split(np.arange(n), max(n // BATCH_POSES, 1))
-        ]
+        cuts = np.array_split(np.arange(n), max(n // BATCH_POSES, 1))
+        batches = [slice(c[0], c[-1] + 1) for c in cuts]
+        rows = [slice(b.start * per_pose, b.stop * per_pose) for b in batches]
+        jacobians = prefetched(lambda sl: self._kernel_rows(p, sl), batches)
+        return zip(jacobians, rows, strict=True)
+
+    def _reduce(self, p: np.ndarray, r: np.ndarray) -> Reduction:
         red = Reduction.empty(len(self.kernel_columns))
-        # the kernels evaluate the next batch in a thread while this one is folded here
-        for sl, J in zip(
-            batches, prefetched(lambda sl: self._kernel_rows(p, sl), batches), strict=True
-        ):
-            red = red.fold(J, r[sl.start * per_pose : sl.stop * per_pose])
+        for J, rows in self._batches(p):
+            red = red.fold(J, r[rows])
         return red
+
+    def _normal(self, p: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(JᵀJ, Jᵀr)`` of every kernel column, (k, k) and (k,)."""
+        k = len(self.kernel_columns)
+        G, g = np.zeros((k, k)), np.zeros(k)
+        for J, rows in self._batches(p):
+            G += J.T @ J
+            g += J.T @ r[rows]
+        return G, g
 
     def _kernel_rows(self, p: np.ndarray, poses: slice) -> np.ndarray:
         """Weighted Jacobian rows of `poses`, every kernel column, (rows, k_kernel)."""

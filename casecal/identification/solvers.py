@@ -70,7 +70,7 @@ def _variance(problem: Problem, cost: float) -> float:
 def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
     for it in range(1, max_iterations + 1):
-        linear = problem.reduced(x, r)
+        linear = problem.reduced(x, r, exact=False)
         step, predicted = gauss_newton_step(linear)
         done = _converged(predicted, cost, tolerance, floor)
         t = 1.0
@@ -106,7 +106,7 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
 
 def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
-    linear = problem.reduced(x, r)
+    linear = problem.reduced(x, r, exact=False)
     norms = linear.norms
     norms[norms == 0] = 1.0
     mu, nu, stalls = None, 2.0, 0
@@ -147,7 +147,7 @@ def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callba
                 return x, it, 4, history, None
             if small or stalls >= 3:  # three steps in a row that change nothing visible
                 return x, it, 2, history, None
-            linear = problem.reduced(x, r)
+            linear = problem.reduced(x, r, exact=False)
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
         else:
@@ -173,7 +173,7 @@ class _LeastSquares:
 
     def _scaled(self, z):
         """(R / norms, Qᵀr) of the weighted ``[J | r]`` at `z` (memoised by the problem)."""
-        linear = self.problem.reduced(z / self.norms)
+        linear = self.problem.reduced(z / self.norms, exact=False)
         return linear.R / self.norms, linear.Qtr
 
     def value(self, z):
