@@ -52,8 +52,8 @@ def cores() -> int:
         n = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # not on Linux
         n = os.cpu_count() or 1
-    cap = os.environ.get("CASECAL_THREADS", "")
-    return max(1, min(n, int(cap))) if cap.isdigit() and int(cap) > 0 else max(n, 1)
+    cap = os.environ.get("CASECAL_THREADS", "")  # 0 as 1: no threads
+    return max(1, min(n, int(cap))) if cap.isdigit() else max(n, 1)
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None  # (pid, pool): a fork has no threads
@@ -97,9 +97,13 @@ def _pool() -> ThreadPoolExecutor | None:
     global _POOL
     if cores() < 2 or getattr(_INSIDE, "pool", False):
         return None
-    if _POOL is None or _POOL[0] != os.getpid():
-        _POOL = (os.getpid(), ThreadPoolExecutor(cores(), thread_name_prefix="casecal"))
-    return _POOL[1]
+    with _CREATING:
+        if _POOL is None or _POOL[0] != os.getpid():
+            _POOL = (os.getpid(), ThreadPoolExecutor(cores(), thread_name_prefix="casecal"))
+        return _POOL[1]
+
+
+_CREATING = threading.Lock()
 
 
 _INSIDE = threading.local()

@@ -113,6 +113,8 @@ class Reduction:
     def fold(self, J: np.ndarray, r: np.ndarray) -> Reduction:
         """This system with the rows ``[J | r]`` added, shape (m, k) and (m,)."""
         k, s = self.k, self.R.shape[0]
+        if s + J.shape[0] == 0:
+            return self
         A = np.empty((s + J.shape[0], k + 1), order="F")
         A[:s, :k], A[:s, k] = self.R, self.Qtr
         A[s:, :k], A[s:, k] = J, r

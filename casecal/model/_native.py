@@ -7,7 +7,8 @@ costs one Python call. The shared library is cached in ``$CASECAL_CACHE`` or
 ``~/.cache/casecal`` under a hash of its key (robot structure, output, parameter columns)
 and of the code that generates it, so a structure is compiled once per machine and a warm
 process loads it without building any CasADi graph. Any failure (no compiler, read-only
-cache, compile error) falls back to CasADi's own evaluation, logged but never raised.
+cache, compile error) falls back to numpy's evaluation of the same instruction list
+(`casecal.model._vectorised`) or CasADi's own, logged but never raised.
 
 A cached library is verified before it is loaded: a sidecar written at build time holds its
 size and SHA-256, and the library exports its own key's digest (`casecal_key`), checked
@@ -127,7 +128,7 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
         if lib is None:
             cc = compiler()
             if cc is None:
-                log.info("no C compiler found; using CasADi's own evaluation")
+                log.info("no C compiler found; evaluating with numpy (casecal.model._vectorised)")
                 return None
             _build(cc, source(build_function(), digest), lib_path)
             lib = _load(lib_path, digest)
@@ -135,7 +136,7 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
             raise OSError(f"the kernel just built at {lib_path} does not verify")
     except (OSError, subprocess.CalledProcessError) as exc:
         log.warning(
-            "could not compile a kernel for %s (%s); using CasADi's own evaluation", key, exc
+            "could not compile a kernel for %s (%s); evaluating with numpy instead", key, exc
         )
         return None
     batch = lib.casecal_batch
@@ -218,6 +219,7 @@ STALE_BUILD = 3600.0
 
 
 def _build(cc: str, src: str, lib_path: Path) -> None:
+    started = time.perf_counter()
     lib_path.parent.mkdir(parents=True, exist_ok=True)
     _sweep(lib_path.parent)
     with tempfile.TemporaryDirectory(prefix=BUILD_PREFIX, dir=lib_path.parent) as tmp:
@@ -235,7 +237,8 @@ def _build(cc: str, src: str, lib_path: Path) -> None:
         # each rename is atomic: a concurrent process sees the old file or the new one
         os.replace(record, _sidecar(lib_path))
         os.replace(so_file, lib_path)
-    log.info("compiled %s", lib_path)
+    took = time.perf_counter() - started
+    log.info("compiled %s in %.2f s (once per machine)", lib_path.name, took)
 
 
 def _sweep(folder: Path) -> None:

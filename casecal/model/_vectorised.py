@@ -33,8 +33,8 @@ _BINARY = {
     ca.OP_POW: "np.power({0}, {1})",
     ca.OP_CONSTPOW: "np.power({0}, {1})",
     ca.OP_ATAN2: "np.arctan2({0}, {1})",
-    ca.OP_FMIN: "np.minimum({0}, {1})",
-    ca.OP_FMAX: "np.maximum({0}, {1})",
+    ca.OP_FMIN: "np.fmin({0}, {1})",
+    ca.OP_FMAX: "np.fmax({0}, {1})",
     ca.OP_HYPOT: "np.hypot({0}, {1})",
     ca.OP_COPYSIGN: "np.copysign({0}, {1})",
     ca.OP_FMOD: "np.fmod({0}, {1})",
@@ -83,12 +83,14 @@ def source(function: ca.Function) -> str:
         op = function.instruction_id(k)
         o, i = function.instruction_output(k), function.instruction_input(k)
         if op == ca.OP_INPUT:
-            source_ = f"q[{i[1]}]" if i[0] == 0 else f"float(p[{i[1]}])"
+            # a parameter is a numpy scalar, not a float: 1/0 gives inf as in C, not an error
+            source_ = f"q[{i[1]}]" if i[0] == 0 else f"p[{i[1]}]"
             lines.append(f"    w{o[0]} = {source_}")
         elif op == ca.OP_OUTPUT:
             lines.append(f"    out[:, {o[1]}] = w{i[0]}")
         elif op == ca.OP_CONST:
-            lines.append(f"    w{o[0]} = {float(function.instruction_constant(k))!r}")
+            value = float(function.instruction_constant(k))
+            lines.append(f"    w{o[0]} = np.float64({str(value)!r})")
         elif op in _BINARY:
             lines.append(f"    w{o[0]} = " + _BINARY[op].format(f"w{i[0]}", f"w{i[1]}"))
         elif op in _UNARY:

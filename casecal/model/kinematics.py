@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -54,6 +55,9 @@ log = logging.getLogger(__name__)
 
 PARALLEL_TOLERANCE = 0.01
 """Consecutive axes with ``|sin(alpha)|`` below this count as parallel (about 0.57°)."""
+
+_BUILDING = threading.RLock()
+"""Held while a graph, Function or kernel is built: evaluations run on several threads."""
 
 COMPILE_MIN_POSES = 200
 """Batches of at least this many poses use compiled C (when a C compiler is present)."""
@@ -235,7 +239,9 @@ class Chain:
         A process whose compiled kernels are all in the disk cache never builds it.
         """
         if self._graph is None:
-            self._graph = self._build()
+            with _BUILDING:  # kernels run on several threads: one graph per chain
+                if self._graph is None:
+                    self._graph = self._build()
         return self._graph
 
     def _build(self):
@@ -399,7 +405,8 @@ class Chain:
         key = (kind, columns)
         evaluator = self._evaluators.get(key)
         if evaluator is None:
-            evaluator = self._evaluators[key] = _Evaluator(self, kind, columns)
+            with _BUILDING:
+                evaluator = self._evaluators.setdefault(key, _Evaluator(self, kind, columns))
         return evaluator
 
     def _points(self, T) -> ca.SX:
@@ -442,7 +449,9 @@ class _Evaluator:
     @property
     def function(self) -> ca.Function:
         if self._function is None:
-            self._function = self.chain.function(self.kind, self.columns)
+            with _BUILDING:
+                if self._function is None:
+                    self._function = self.chain.function(self.kind, self.columns)
         return self._function
 
     def __call__(self, q: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -482,11 +491,13 @@ class _Evaluator:
         if backend == "casadi" or (backend == "auto" and n < COMPILE_MIN_POSES):
             return None
         if not self._vectorised_tried:
-            self._vectorised_tried = True
-            try:
-                self._vectorised_fn = _vectorised.Vectorised(self.function)
-            except _vectorised.Unsupported as exc:
-                log.info("numpy evaluation of %s unavailable (%s); using CasADi's", self.kind, exc)
+            with _BUILDING:
+                if not self._vectorised_tried:
+                    try:
+                        self._vectorised_fn = _vectorised.Vectorised(self.function)
+                    except _vectorised.Unsupported as exc:
+                        log.info("numpy evaluation unavailable (%s); using CasADi's", exc)
+                    self._vectorised_tried = True
         return self._vectorised_fn
 
     def _use_native(self, n: int, n_p: int) -> bool:
@@ -494,15 +505,16 @@ class _Evaluator:
         if backend in ("casadi", "numpy") or (backend == "auto" and n < COMPILE_MIN_POSES):
             return False
         if not self._native_tried:
-            self._native_tried = True
-            key = (self.chain.structure, self.kind, self.columns)
-            self._native = _native.kernel(
-                key,
-                lambda: self.function,
-                n_q=self.chain.structure.n_inputs,
-                n_p=n_p,
-                n_out=int(np.prod(self.shape)),
-            )
+            with _BUILDING:  # set "tried" only once the kernel (or None) is in place
+                if not self._native_tried:
+                    self._native = _native.kernel(
+                        (self.chain.structure, self.kind, self.columns),
+                        lambda: self.function,
+                        n_q=self.chain.structure.n_inputs,
+                        n_p=n_p,
+                        n_out=int(np.prod(self.shape)),
+                    )
+                    self._native_tried = True
         if self._native is None and backend == "c":
             raise RuntimeError("CASECAL_BACKEND=c but no C compiler could build the kernel")
         return self._native is not None
