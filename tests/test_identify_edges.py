@@ -140,3 +140,33 @@ def test_cli_output_folders(tmp_path, capsys):
     code = main(["simulate", "scorbot", "--poses", "5", "-o", str(blocked / "x.csv")])
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("casecal: error:") and err.count("\n") == 1
+
+
+def test_robust_fit_without_sigma_counts_only_the_poses_it_kept():
+    """Standard errors of a Huber fit with outliers left out equal those of a fit of the
+    clean poses alone: zero-weight rows are no degrees of freedom (they were 0.83x)."""
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 2e-4, "d3": -1e-4, "theta2": 1e-4, "a3": -2e-4})
+    q = cc.poses.uniform(robot, 200, seed=0)
+    y = cc.simulate(true, q, noise=2e-5, seed=1).positions.copy()
+    rng = np.random.default_rng(5)
+    bad = rng.choice(200, 60, replace=False)
+    y[bad] += rng.normal(0, 2e-3, size=y[bad].shape)
+    keep = np.setdiff1d(np.arange(200), bad)
+    robust = cc.identify(robot, cc.Measurements(q, y, 0.0), loss="huber")
+    clean = cc.identify(robot, cc.Measurements(q[keep], y[keep], 0.0))
+    assert robust.success and clean.success and len(robust.outliers) == 60
+    for name in ("a2", "theta2", "a3"):
+        assert robust.standard_errors[name] == pytest.approx(clean.standard_errors[name], rel=1e-6)
+
+
+@pytest.mark.parametrize("option", ["bounds", "prior"])
+def test_bounds_and_priors_on_the_base_are_refused_not_ignored(option):
+    """The base is fitted from a rigid fit of the data: a bound on base_x used to end
+    1 mm outside it with the audit saying no estimate sat on its bounds."""
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 2e-4, "base_x": 1e-3})
+    meas = cc.simulate(true, cc.poses.uniform(robot, 100, seed=0), noise=2e-5, seed=1)
+    value = {"bounds": {"base_x": (0.0, 5e-4)}, "prior": {"base_x": 1e-5}}[option]
+    with pytest.raises(cc.CalibrationError, match="base frame"):
+        cc.identify(robot, meas, "all", "ipopt", **{option: value})

@@ -255,3 +255,41 @@ def test_covariance_pairs_with_the_position_jacobian_of_the_estimated_names():
     assert tuple(names) == cal.estimated
     Jw = J.reshape(-1, len(names)) / 0.01e-3
     np.testing.assert_allclose(cal.covariance @ (Jw.T @ Jw), np.eye(len(names)), atol=1e-6)
+
+
+def test_squeezed_poses_do_not_pass_on_a_lucky_correction():
+    """Poses within 5 % of the joint ranges, RX90 in modified DH (an adversarial user's
+    trial 7): the fit predicted 0.154 mm against "about 0.206 mm before" and passed, while
+    it was 0.195 mm off on new poses against the nominal robot's 0.142 mm. The correction
+    it made holds its own error as well as the robot's; one fit's cross term can reach
+    ±2 c p, so the prediction must beat the least the robot was off by."""
+    rng = np.random.default_rng(50007)
+    robot = cc.load_robot("rx90b_mdh")
+    rng.integers(7)
+    if rng.random() < 0.6:
+        robot = robot.with_points([rng.normal(0, 0.08, 3)])
+    scale = 10 ** rng.uniform(-4.5, -2.5)
+    deviations = {
+        k: rng.normal(0, scale)
+        for k in robot.parameters
+        if not k.startswith(("base", "tool")) and rng.random() < 0.4
+    }
+    true = robot.with_deviations(deviations)
+    n = int(rng.choice([30, 60, 200, 1000]))
+    q = cc.poses.uniform(robot, n, seed=7)
+    rng.integers(3)
+    q = q[0] + (q - q[0]) * rng.choice([0.02, 0.05, 0.1])
+    meas = cc.simulate(true, q, noise=float(rng.choice([1e-5, 2e-5, 5e-5])), seed=7)
+    q_new = cc.poses.uniform(robot, 2000, seed=7)
+
+    def rms(r):
+        return float(
+            np.sqrt(
+                np.mean(np.sum((r.measured_points(q_new) - true.measured_points(q_new)) ** 2, -1))
+            )
+        )
+
+    cal = cc.identify(robot, meas, ["theta*", "a*", "d*", "alpha*"])
+    assert rms(cal.robot) > rms(robot)  # the case: calibration made the robot worse
+    assert not cal.success
+    assert "prediction" in cal.message

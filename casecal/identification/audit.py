@@ -459,10 +459,14 @@ def _prediction(f: Facts) -> Check:
     if f.predicted_rms is None:
         return Check(name, None, f.prediction_note or "no joint limits to draw poses from")
     p, c = f.predicted_rms, f.correction_rms
-    # the correction c is the true error before calibration plus the estimate's own
-    # error (independent, mean square p²): what the robot was off by there is √(c² − p²)
+    # the correction c is the true error before calibration b plus the estimate's own
+    # error (mean square p²): c² = b² + p² + 2⟨b, error⟩, and the cross term of one fit
+    # can reach ±2 b p (Cauchy-Schwarz; it does when the estimates absorb something the
+    # poses cannot tell apart). So b² is about c² − p², and at least c² − p² − 2 c p: the
+    # prediction must beat that least value, or the data cannot show the fit helps
     before = np.sqrt(max(c**2 - p**2, 0.0))
-    ok = p <= max(before, f.noise_rms, 1e-9)
+    least = np.sqrt(max(c**2 - p**2 - 2.0 * c * p, 0.0))
+    ok = p <= max(least, f.noise_rms, 1e-9)
     text = (
         f"predicted RMS error on {PREDICTION_POSES} new poses within the joint limits "
         f"{p * 1e3:.3g} mm (from the covariance), against about {before * 1e3:.3g} mm before "
@@ -473,9 +477,9 @@ def _prediction(f: Facts) -> Check:
         "calibration moves them by"
     )
     if not ok:
-        text += (
+        text += (f" (at least {least * 1e3:.3g} mm)" if c > p else "") + (
             ": these poses do not support the estimated parameters, and the calibrated "
-            "robot would be no better than the nominal one away from them (measure more, "
+            "robot may be no better than the nominal one away from them (measure more, "
             "better-spread poses, or ask for fewer parameters)"
         )
     return Check(name, ok, text)

@@ -91,10 +91,12 @@ def identify(
         residuals with; default: the σ stored in `measurements`. With σ = 0 the residuals
         are unweighted and standard errors use the residual scale.
     bounds : dict of str to (float, float), optional
-        ``"ipopt"`` only: lower and upper bound on the deviation of named parameters, SI.
+        ``"ipopt"`` only: lower and upper bound on the deviation of named parameters, SI
+        (not the base frame's, which is fitted from a rigid fit of the data).
     prior : dict of str to float, optional
         ``"ipopt"`` only: standard deviation (SI) of a Gaussian prior centred on the nominal
-        value, per named parameter (regularisation toward nominal). Needs a measurement σ.
+        value, per named parameter (regularisation toward nominal; not the base frame's).
+        Needs a measurement σ.
     max_iterations : int
         Iteration limit of the iterated methods. Default 100.
     tolerance : float
@@ -146,6 +148,15 @@ def identify(
     if unknown:
         raise CalibrationError(
             f"bounds/prior name {unknown[0]!r} is not among the asked-for parameters"
+        )
+    on_base = [n for n in {**bounds, **prior} if n.startswith("base_")]
+    if on_base:
+        # the base is fitted from where a rigid fit of the data puts it, not from nominal:
+        # a bound there would bind another quantity than the one the user named
+        raise CalibrationError(
+            f"bounds and priors on the base frame ({', '.join(on_base)}) are not supported: "
+            "the base is where the instrument stands, fitted from a rigid fit of the data; "
+            "bound or weigh the joint, tool and point parameters only"
         )
     sigma = measurements.sigma if noise is None else broadcast_sigma(noise, q.shape[0])
     known = bool(np.all(sigma > 0))

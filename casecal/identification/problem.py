@@ -10,6 +10,8 @@ memoised, so that the analysis, the solver and the covariance share them.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .._threads import prefetched
@@ -176,15 +178,22 @@ class Problem:
             take = self.take
             step = Reduction.from_normal(G[np.ix_(take, take)], g[take], r @ r, r.size)
             if step is not None:
-                return step
+                return self._observed(step)
         if whole is None:
             whole = self._memoised(
                 (*at, self.kernel_columns),
                 lambda: self._reduce(p, self.residual(x) if r is None else r),
             )
+        whole = self._observed(whole)
         if len(self.take) == whole.k and self.take == list(range(whole.k)):
             return whole
         return whole.columns(self.take)
+
+    def _observed(self, linear: Reduction) -> Reduction:
+        """`linear` counting only rows of non-zero weight: a pose a robust loss left out is
+        no observation (its rows would inflate the degrees of freedom)."""
+        rows = int(np.count_nonzero(self.w_flat))
+        return linear if rows == linear.rows else dataclasses.replace(linear, rows=rows)
 
     def _from_wider(self, at: tuple) -> Reduction | None:
         """A memoised reduction at the same point whose kernel covers this one's columns."""
