@@ -144,7 +144,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         orientation_sigma=rot,
         progress=_progress_line(meas.n_poses),
     )
-    if meas.n_poses >= PROGRESS_POSES:
+    if meas.n_poses >= PROGRESS_POSES and sys.stderr.isatty():
         print(file=sys.stderr)  # end the progress line
     print(cal.summary())
     if args.strict and cal.unidentifiable:
@@ -174,10 +174,12 @@ def _progress_line(n_poses: int):
     if n_poses < PROGRESS_POSES:
         return None
     start = time.perf_counter()
+    rewrite = sys.stderr.isatty()  # a log file gets one line per iteration
 
     def show(line: str) -> None:
         elapsed = time.perf_counter() - start
-        print(f"\rcasecal: {n_poses} poses, {line} ({elapsed:.1f} s)", end="", file=sys.stderr)
+        text = f"casecal: {n_poses} poses, {line} ({elapsed:.1f} s)"
+        print(f"\r{text}" if rewrite else text, end="" if rewrite else "\n", file=sys.stderr)
 
     return show
 
@@ -252,10 +254,13 @@ def _deviations_text(cal, path: str) -> str:
     if path.endswith(".json"):
         import json
 
+        def number(v: float) -> float | None:  # JSON has no NaN: a held parameter's is null
+            return v if np.isfinite(v) else None
+
         data = {
             n: {
-                "deviation": cal.deviations[n],
-                "standard_error": cal.standard_errors[n],
+                "deviation": number(cal.deviations[n]),
+                "standard_error": number(cal.standard_errors[n]),
                 "unit": unit(n),
                 "estimated": n in cal.estimated,
             }
@@ -264,7 +269,7 @@ def _deviations_text(cal, path: str) -> str:
         return json.dumps(
             {"robot": cal.nominal.name, "method": cal.method, "rms_m": cal.rms, "parameters": data},
             indent=2,
-            allow_nan=True,
+            allow_nan=False,
         )
     table = cal.table.copy()
     table.insert(3, "deviation_si", [cal.deviations[n] for n in cal.parameters])

@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import casecal as cc
 from casecal.cli import main
@@ -41,8 +42,11 @@ def test_example_session_identify_holdout_and_validate(tmp_path, capsys):
     assert after < 0.05 < before  # mm: the DH errors are gone, the noise is 0.02 mm
     calibrated = cc.load_robot(out)
     assert calibrated.calibrated_from == "puma560" and len(calibrated.points) == 2
-    data = json.loads(dev.read_text())
+    # strict JSON (no NaN, which other languages' parsers reject): held ones are null
+    data = json.loads(dev.read_text(), parse_constant=lambda c: pytest.fail(f"JSON has {c}"))
     assert data["parameters"]["a2"]["unit"] == "m" and data["parameters"]["a2"]["estimated"]
+    held = [v for v in data["parameters"].values() if not v["estimated"]]
+    assert held and all(v["standard_error"] is None for v in held)
 
     # a second session with the instrument elsewhere: validate refits only the frames
     true = (

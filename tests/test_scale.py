@@ -147,3 +147,11 @@ def test_identify_without_a_compiler_gives_the_compiled_answer(monkeypatch):
     assert vectorised.success and vectorised.estimated == compiled.estimated
     for name in compiled.estimated:
         assert vectorised.deviations[name] == pytest.approx(compiled.deviations[name], abs=1e-12)
+
+
+def test_a_mistyped_backend_is_refused_not_taken_for_auto(monkeypatch):
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 300, seed=0)
+    monkeypatch.setenv("CASECAL_BACKEND", "nunpy")
+    with pytest.raises(cc.CalibrationError, match="CASECAL_BACKEND='nunpy'"):
+        robot.position(q)

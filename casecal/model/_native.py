@@ -128,16 +128,14 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
         if lib is None:
             cc = compiler()
             if cc is None:
-                log.info("no C compiler found; evaluating with numpy (casecal.model._vectorised)")
+                _say_once("no C compiler found; evaluating with numpy (casecal.model._vectorised)")
                 return None
             _build(cc, source(build_function(), digest), lib_path)
             lib = _load(lib_path, digest)
         if lib is None:
             raise OSError(f"the kernel just built at {lib_path} does not verify")
     except (OSError, subprocess.CalledProcessError) as exc:
-        log.warning(
-            "could not compile a kernel for %s (%s); evaluating with numpy instead", key, exc
-        )
+        _say_once(f"could not compile kernels ({exc}); evaluating with numpy instead", log.warning)
         return None
     batch = lib.casecal_batch
     batch.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
@@ -155,6 +153,16 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
             raise RuntimeError(f"compiled kernel {key} returned status {status}")
 
     return call
+
+
+_SAID: set[str] = set()
+
+
+def _say_once(message: str, say=None) -> None:
+    """Log `message` (info, or with `say`) once per process: every kernel would repeat it."""
+    if message not in _SAID:
+        _SAID.add(message)
+        (say or log.info)(message)
 
 
 def _load(lib_path: Path, digest: str):

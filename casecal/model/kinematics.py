@@ -47,6 +47,7 @@ import casadi as ca
 import numpy as np
 
 from .._threads import cores, thread_map
+from ..errors import CalibrationError
 from . import _native, _vectorised
 from .chainwalk import walk
 from .parameters import parameter_names, urdf_parameter_names
@@ -487,7 +488,7 @@ class _Evaluator:
 
     def _vectorised(self, n: int):
         """The numpy evaluator of the instruction list (`_vectorised`) where it serves."""
-        backend = os.environ.get("CASECAL_BACKEND", "auto")
+        backend = backend_choice()
         if backend == "casadi" or (backend == "auto" and n < COMPILE_MIN_POSES):
             return None
         if not self._vectorised_tried:
@@ -501,7 +502,7 @@ class _Evaluator:
         return self._vectorised_fn
 
     def _use_native(self, n: int, n_p: int) -> bool:
-        backend = os.environ.get("CASECAL_BACKEND", "auto")
+        backend = backend_choice()
         if backend in ("casadi", "numpy") or (backend == "auto" and n < COMPILE_MIN_POSES):
             return False
         if not self._native_tried:
@@ -518,6 +519,18 @@ class _Evaluator:
         if self._native is None and backend == "c":
             raise RuntimeError("CASECAL_BACKEND=c but no C compiler could build the kernel")
         return self._native is not None
+
+
+BACKENDS = ("auto", "c", "numpy", "casadi")
+
+
+def backend_choice() -> str:
+    """``$CASECAL_BACKEND``: auto (C when a compiler is present, else numpy), c, numpy
+    (the instruction list vectorised, `casecal.model._vectorised`) or casadi (its own)."""
+    backend = os.environ.get("CASECAL_BACKEND", "auto").strip().lower() or "auto"
+    if backend not in BACKENDS:
+        raise CalibrationError(f"CASECAL_BACKEND={backend!r}; use one of {', '.join(BACKENDS)}")
+    return backend
 
 
 @cache
