@@ -477,7 +477,11 @@ def _prediction(f: Facts) -> Check:
         "calibration moves them by"
     )
     if not ok:
-        text += (f" (at least {least * 1e3:.3g} mm)" if c > p else "") + (
+        # the least the robot was off by, once the fit's own error is allowed for
+        least_text = (
+            f"at least {least * 1e3:.3g} mm" if least > 0 else "possibly no more than predicted"
+        )
+        text += (f" ({least_text}, allowing for the fit's own error)" if c > p else "") + (
             ": these poses do not support the estimated parameters, and the calibrated "
             "robot may be no better than the nominal one away from them (measure more, "
             "better-spread poses, or ask for fewer parameters)"
