@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
-from casecal._threads import thread_map
+from casecal._threads import prefetched, thread_map
 from casecal.identification import problem as problem_module
 from casecal.identification.linalg import Reduction
 
@@ -97,6 +97,43 @@ def test_thread_map_keeps_order_and_does_not_deadlock_when_nested():
         return sum(thread_map(lambda j: i * j, list(range(5))))
 
     assert thread_map(inner, list(range(8))) == [10 * i for i in range(8)]
+
+
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_prefetched_never_overwrites_the_buffer_the_caller_holds(threads, monkeypatch):
+    """Workers run ahead into a ring of buffers; the value the caller holds must stay put
+    while the caller works on it (a ring one too small would overwrite it)."""
+    import time
+
+    monkeypatch.setenv("CASECAL_THREADS", threads)
+    rng = np.random.default_rng(0)
+    delays = rng.uniform(0, 2e-3, size=40)
+
+    def fill(i, buffer):
+        time.sleep(delays[i] / 4)
+        buffer[:] = i
+        return buffer
+
+    seen = []
+    for i, value in enumerate(prefetched(fill, list(range(40)), buffer=lambda: np.empty(50))):
+        time.sleep(delays[-1 - i])  # the caller's work, while workers run ahead
+        seen.append(bool(np.all(value == i)))
+    assert all(seen)
+
+
+def test_kernels_write_into_a_given_buffer():
+    from casecal.model import kinematics
+
+    robot = cc.load_robot("puma560")
+    chain = kinematics.chain(robot.structure)
+    q = cc.poses.uniform(robot, 300, seed=2)
+    cols = chain.columns(("a2", "d3", "alpha4"))
+    fresh = chain.evaluate("points_jacobian", q, robot.vector(), cols)
+    out = np.full((300, 3, 3), np.nan)
+    got = chain.evaluate("points_jacobian", q, robot.vector(), cols, out)
+    assert got is out and np.array_equal(out, fresh)
+    with pytest.raises(ValueError, match="shape"):
+        chain.evaluate("points_jacobian", q, robot.vector(), cols, np.empty((300, 3, 4)))
 
 
 def _robots_for_backends():

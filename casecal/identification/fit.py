@@ -258,6 +258,7 @@ def _shared(make):
     rounds, the solver and the audit share its memoised residuals and reductions (a pass
     over a million poses costs a second). Lives as long as one `identify` call."""
     kept: dict = {}
+    memo: dict = {}  # one for all: the same data, keyed by the whole parameter vector
 
     def shared(robot, names, kernel_names=None, **other):
         if other:
@@ -270,7 +271,7 @@ def _shared(make):
             problem = (
                 same[-1].with_kernel(key[3])
                 if same
-                else make(robot, names=names, kernel_names=kernel_names)
+                else make(robot, names=names, kernel_names=kernel_names, memo=memo)
             )
         kept[key] = problem  # the latest last
         while len(kept) > SHARED_PROBLEMS:

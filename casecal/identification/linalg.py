@@ -110,17 +110,37 @@ class Reduction:
         """``|r|² - |Qᵀr|²``: the part of r no combination of the columns explains."""
         return max(self.rr - float(self.Qtr @ self.Qtr), 0.0)
 
-    def fold(self, J: np.ndarray, r: np.ndarray) -> Reduction:
-        """This system with the rows ``[J | r]`` added, shape (m, k) and (m,)."""
-        k, s = self.k, self.R.shape[0]
-        if s + J.shape[0] == 0:
+    def fold(self, J: np.ndarray, r: np.ndarray, work: np.ndarray | None = None) -> Reduction:
+        """This system with the rows ``[J | r]`` added, shape (m, k) and (m,).
+
+        `work`, a Fortran-ordered array of at least ``k + m`` rows and ``k + 1`` columns,
+        is overwritten instead of allocating one (`folded` reuses one for every batch).
+        """
+        k, s, m = self.k, self.R.shape[0], J.shape[0]
+        if s + m == 0:
             return self
-        A = np.empty((s + J.shape[0], k + 1), order="F")
-        A[:s, :k], A[:s, k] = self.R, self.Qtr
-        A[s:, :k], A[s:, k] = J, r
-        Ra = _r_factor(A)
-        t = min(Ra.shape[0], k)
-        return Reduction(Ra[:t, :k], Ra[:t, k], self.rr + float(r @ r), self.rows + int(J.shape[0]))
+        if work is None:
+            work = np.empty((s + m, k + 1), order="F")
+        elif work.shape[1] != k + 1 or work.shape[0] < s + m or not work.flags.f_contiguous:
+            raise ValueError(f"work must be Fortran-ordered, at least {s + m} × {k + 1}")
+        work[:s, :k], work[:s, k] = self.R, self.Qtr
+        work[s : s + m, :k], work[s : s + m, k] = J, r
+        work[s + m :] = 0.0  # zero rows change no R factor
+        Ra = _r_factor(work)
+        t = min(s + m, k)
+        return Reduction(Ra[:t, :k], Ra[:t, k], self.rr + float(r @ r), self.rows + int(m))
+
+    @classmethod
+    def folded(cls, k: int, batches) -> Reduction:
+        """The reduction of every ``(J, r)`` of `batches` (m_i × k, m_i), folded one by one
+        into one work array: no allocation per batch, whose fresh pages would cost as
+        much as the factorisation."""
+        red, work = cls.empty(k), None
+        for J, r in batches:
+            if work is None or work.shape[0] < k + J.shape[0]:
+                work = np.empty((k + J.shape[0], k + 1), order="F")
+            red = red.fold(J, r, work)
+        return red
 
     def merge(self, other: Reduction) -> Reduction:
         """The system of this one's rows and `other`'s (same columns)."""
@@ -165,7 +185,7 @@ def _r_factor(A: np.ndarray) -> np.ndarray:
     qr, _, _, info = lapack.dgeqrf(A, overwrite_a=True)
     if info:
         raise ValueError(f"internal error: LAPACK dgeqrf returned {info}")
-    return np.triu(qr[: min(A.shape)])
+    return np.triu(qr[: min(A.shape)])  # a copy: `A` may be reused
 
 
 def svd_solve(J, r: np.ndarray | None = None) -> np.ndarray:

@@ -23,8 +23,8 @@ from .linalg import Reduction
 BATCH_POSES = 4096
 """Poses per batch of `Problem.reduced`: a batch's Jacobian (3 · 4096 × k) stays in cache."""
 
-MEMO = 6
-"""Evaluations kept per problem: residuals are O(N), reductions O(k²)."""
+MEMO = 8
+"""Evaluations kept per memo: point evaluations are O(N), reductions O(k²)."""
 
 
 class Problem:
@@ -53,10 +53,23 @@ class Problem:
         Measured tool rotations.
     w_rot : float
         Orientation weight 1/σ_rot, 1/rad.
+    memo : dict, optional
+        Where evaluations and reductions are memoised, keyed by the whole parameter vector:
+        problems of the same data (same `q`, `y`, `w`) may share one, so that a point the
+        solver evaluated is not evaluated again by the analysis or the audit.
     """
 
     def __init__(
-        self, robot: Robot, q, y, w, names, kernel_names=None, orientations=None, w_rot: float = 0.0
+        self,
+        robot: Robot,
+        q,
+        y,
+        w,
+        names,
+        kernel_names=None,
+        orientations=None,
+        w_rot: float = 0.0,
+        memo: dict | None = None,
     ):
         self.robot = robot
         self.chain = kinematics.chain(robot.structure)
@@ -77,8 +90,8 @@ class Problem:
         if orientations is not None:
             self.w_rows = np.hstack([self.w_rows, np.full((n, 3), self.w_rot)])
         self.w_flat = self.w_rows.ravel()
-        self._memo: dict = {}  # (kind, p bytes[, weights]) -> value; shared with copies
-        self._weights = object()  # identifies the weights in memo keys
+        self._memo = {} if memo is None else memo  # (kind, p bytes[, weights]) -> value
+        self._weights = "data"  # identifies the weights in memo keys; reweighted: its own
 
     def reweighted(self, point_weights: np.ndarray) -> Problem:
         """The same problem with each measured point's rows scaled by √weight (N, m).
@@ -108,16 +121,17 @@ class Problem:
 
     def _memoised(self, key, compute):
         # solvers, the identifiability analysis and the result ask for the same points
-        value = self._memo.get(key)
+        value = self._memo.pop(key, None)
         if value is None:
             value = compute()
-            if len(self._memo) >= MEMO:
+            while len(self._memo) >= MEMO:
                 self._memo.pop(next(iter(self._memo)))
-            self._memo[key] = value
+        self._memo[key] = value  # the latest used last
         return value
 
     def _evaluate(self, kind: str, p: np.ndarray) -> np.ndarray:
-        return self._memoised((kind, p.tobytes()), lambda: self.chain.evaluate(kind, self.q, p))
+        key = (kind, self.robot.structure, p.tobytes())
+        return self._memoised(key, lambda: self.chain.evaluate(kind, self.q, p))
 
     def p(self, x: np.ndarray) -> np.ndarray:
         p = self.p0.copy()
@@ -169,7 +183,7 @@ class Problem:
             Of the columns `names`, with ``rows`` the N · rows-per-pose residuals.
         """
         p = self.p(x)
-        at = ("reduced", p.tobytes(), self._weights)
+        at = ("reduced", self.robot.structure, p.tobytes(), self._weights)
         whole = self._memo.get((*at, self.kernel_columns)) or self._from_wider(at)
         if whole is None and not exact:
             r = self.residual(x) if r is None else r
@@ -199,8 +213,8 @@ class Problem:
         """A memoised reduction at the same point whose kernel covers this one's columns."""
         need = self.kernel_columns
         for key, value in self._memo.items():
-            if key[:3] == at and set(need) <= set(key[3]):
-                return value.columns([key[3].index(c) for c in need])
+            if key[:4] == at and set(need) <= set(key[4]):
+                return value.columns([key[4].index(c) for c in need])
         return None
 
     def with_kernel(self, kernel_names) -> Problem:
@@ -214,20 +228,24 @@ class Problem:
 
     def _batches(self, p: np.ndarray):
         """``(J, rows)`` per batch of poses: the weighted Jacobian rows and their slice of
-        the residual vector. The kernels evaluate the next batch in a thread while the
-        caller reduces this one."""
+        the residual vector. The kernels evaluate the next batches in threads while the
+        caller reduces this one, into buffers that are reused: each J is valid until the
+        caller asks for the next."""
         n, per_pose = len(self.q), self.w_rows.shape[1]
         cuts = np.array_split(np.arange(n), max(n // BATCH_POSES, 1))
         batches = [slice(c[0], c[-1] + 1) for c in cuts]
         rows = [slice(b.start * per_pose, b.stop * per_pose) for b in batches]
-        jacobians = prefetched(lambda sl: self._kernel_rows(p, sl), batches)
+        shape = (len(cuts[0]), per_pose, len(self.kernel_columns))  # the first is the largest
+        jacobians = prefetched(
+            lambda sl, buffer: self._kernel_rows(p, sl, buffer),
+            batches,
+            buffer=lambda: np.empty(shape),
+        )
         return zip(jacobians, rows, strict=True)
 
     def _reduce(self, p: np.ndarray, r: np.ndarray) -> Reduction:
-        red = Reduction.empty(len(self.kernel_columns))
-        for J, rows in self._batches(p):
-            red = red.fold(J, r[rows])
-        return red
+        batches = ((J, r[rows]) for J, rows in self._batches(p))
+        return Reduction.folded(len(self.kernel_columns), batches)
 
     def _normal(self, p: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(JᵀJ, Jᵀr)`` of every kernel column, (k, k) and (k,)."""
@@ -238,11 +256,18 @@ class Problem:
             g += J.T @ r[rows]
         return G, g
 
-    def _kernel_rows(self, p: np.ndarray, poses: slice) -> np.ndarray:
-        """Weighted Jacobian rows of `poses`, every kernel column, (rows, k_kernel)."""
+    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None) -> np.ndarray:
+        """Weighted Jacobian rows of `poses`, every kernel column, (rows, k_kernel).
+
+        Written into `buffer` (C-ordered, (n ≥ poses, rows per pose, k_kernel)) if given.
+        """
         q, k = self.q[poses], len(self.kernel_columns)
-        J = self.chain.evaluate("points_jacobian", q, p, self.kernel_columns)  # (n, 3m, k)
-        if self.R is not None:  # rotation rows
+        out = None if buffer is None else buffer[: len(q)]
+        if self.R is None:
+            J = self.chain.evaluate("points_jacobian", q, p, self.kernel_columns, out)
+        else:  # rotation rows under the points' rows
+            J = self.chain.evaluate("points_jacobian", q, p, self.kernel_columns)  # (n, 3m, k)
             rot = self.chain.evaluate("pose_jacobian", q, p, self.kernel_columns)[:, 3:, :]
-            J = np.concatenate([J, rot], axis=1)
-        return (J * self.w_rows[poses, :, None]).reshape(-1, k)
+            J = np.concatenate([J, rot], axis=1, out=out)
+        J *= self.w_rows[poses, :, None]  # J is this call's own (or the caller's buffer)
+        return J.reshape(-1, k)

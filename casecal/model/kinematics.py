@@ -370,7 +370,9 @@ class Chain:
             raise RuntimeError(f"internal error: {kind} graph has free symbols")
         return f
 
-    def evaluate(self, kind: str, q: np.ndarray, p: np.ndarray, columns=()) -> np.ndarray:
+    def evaluate(
+        self, kind: str, q: np.ndarray, p: np.ndarray, columns=(), out: np.ndarray | None = None
+    ) -> np.ndarray:
         """Evaluate `kind` at N poses in one call.
 
         Parameters
@@ -382,10 +384,15 @@ class Chain:
             Full parameter vector, SI (extended here with the cosines and sines).
         columns : tuple of int
             Parameter indices for the Jacobians.
+        out : ndarray, optional
+            C-contiguous float64 array of the output's shape to write into: a batch loop
+            that reuses one spares the allocator (fresh pages of megabytes per batch, with
+            threads faulting them in against each other, cost more than the kernel).
 
         Returns
         -------
         ndarray, shape (N, 4, 4), (N, 3), (N, 3, k) or (N, 6, k)
+            `out` when given.
         """
         columns = tuple(columns)
         if q.shape[1] == len(self.structure.joint_types) and self.structure.inputs:
@@ -397,10 +404,11 @@ class Chain:
             if hot >= HOT_CALLS:
                 jacobian = kind in PARAMETER_JACOBIANS
                 every = tuple(range(len(self.names))) if jacobian else ()
-                out = self._evaluator(kind, every).compiled(q, self.extended(p))
-                if out is not None:
-                    return out[..., list(columns)] if jacobian else out
-        return self._evaluator(kind, columns)(q, self.extended(p))
+                value = self._evaluator(kind, every).compiled(q, self.extended(p))
+                if value is not None:
+                    value = value[..., list(columns)] if jacobian else value
+                    return value if out is None else _into(out, value)
+        return self._evaluator(kind, columns)(q, self.extended(p), out)
 
     def _evaluator(self, kind: str, columns: tuple[int, ...]) -> _Evaluator:
         key = (kind, columns)
@@ -435,6 +443,13 @@ class Chain:
         }[kind]
 
 
+def _into(out: np.ndarray, value: np.ndarray) -> np.ndarray:
+    if out.shape != value.shape:
+        raise ValueError(f"out must be of shape {value.shape}, not {out.shape}")
+    out[...] = value
+    return out
+
+
 class _Evaluator:
     """Batched evaluation of one kind of output: compiled C if possible, else CasADi."""
 
@@ -455,10 +470,12 @@ class _Evaluator:
                     self._function = self.chain.function(self.kind, self.columns)
         return self._function
 
-    def __call__(self, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    def __call__(self, q: np.ndarray, p: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         n = q.shape[0]
+        if out is not None and (out.shape != (n, *self.shape) or not out.flags.c_contiguous):
+            raise ValueError(f"out must be C-contiguous of shape {(n, *self.shape)}")
         if self._use_native(n, p.size):
-            out = np.empty((n, *self.shape))
+            out = np.empty((n, *self.shape)) if out is None else out
             # the C loop releases the GIL: large batches run on every core, in chunks
             parts = max(min(n // PARALLEL_POSES, cores()), 1)
             bounds = np.linspace(0, n, parts + 1).astype(int)
@@ -470,13 +487,14 @@ class _Evaluator:
             return out
         vectorised = self._vectorised(n)
         if vectorised is not None:  # no compiler: numpy over all poses at once
-            return vectorised(q, p).reshape(n, *self.shape)
-        # CasADi evaluates all N poses in one call when q has N times the expected columns;
-        # its output is the horizontal concatenation of the transposed per-pose outputs
-        res = np.asarray(self.function(q.T, p), dtype=float)
-        if len(self.shape) == 1:
-            return res.T.copy()
-        return res.T.reshape(n, *self.shape)
+            value = vectorised(q, p).reshape(n, *self.shape)
+        else:
+            # CasADi evaluates all N poses in one call when q has N times the expected
+            # columns; its output is the horizontal concatenation of the transposed
+            # per-pose outputs
+            res = np.asarray(self.function(q.T, p), dtype=float)
+            value = res.T.copy() if len(self.shape) == 1 else res.T.reshape(n, *self.shape)
+        return value if out is None else _into(out, value)
 
     def compiled(self, q: np.ndarray, p: np.ndarray) -> np.ndarray | None:
         """The output by compiled C whatever the batch size, or None without a kernel."""
