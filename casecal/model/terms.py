@@ -21,8 +21,10 @@ a new value whenever the function changes.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import numbers
+import types
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -137,15 +139,40 @@ class ErrorTerm:
         return (self.kind, self.joint, self.parameters, self.data, self.target, self.code)
 
 
-def fingerprint(function) -> str:
+def fingerprint(function, _depth: int = 0) -> str:
     """A hash of a function's code, constants, names, defaults and closure values: the
-    same across processes for the same source, different after an edit."""
-    code = getattr(function, "__code__", None)
-    if code is None:
+    same across processes for the same source, different after an edit.
+
+    Nested code (a comprehension, a lambda) and functions among the closure values are
+    hashed by their code too: their repr holds a memory address, which would key the
+    compiled kernels per process and compile them again in every one.
+    """
+    if _depth > 8:  # a function in its own closure (recursion): its name will do
+        return getattr(function, "__qualname__", type(function).__name__)
+    if isinstance(function, functools.partial):
+        parts = (function.func, function.args, function.keywords)
+    elif hasattr(function, "__code__"):
+        closure = [c.cell_contents for c in (function.__closure__ or ())]
+        parts = (function.__code__, function.__defaults__, closure)
+    else:
         return repr(function)
-    closure = [c.cell_contents for c in (function.__closure__ or ())]
-    text = repr((code.co_code, code.co_consts, code.co_names, function.__defaults__, closure))
+    text = repr(_stable(parts, _depth + 1))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _stable(value, depth: int):
+    """`value` with code objects and functions replaced by what defines them."""
+    if isinstance(value, types.CodeType):
+        return (value.co_code, _stable(value.co_consts, depth), value.co_names)
+    if isinstance(value, (tuple, list)):
+        return tuple(_stable(v, depth) for v in value)
+    if isinstance(value, dict):
+        return tuple((k, _stable(v, depth)) for k, v in value.items())
+    if isinstance(value, (set, frozenset)):  # ordered by the per-process hash seed
+        return ("set", tuple(sorted(repr(_stable(v, depth)) for v in value)))
+    if hasattr(value, "__code__") or isinstance(value, functools.partial):
+        return fingerprint(value, depth)
+    return value
 
 
 def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=()) -> tuple:
