@@ -68,6 +68,29 @@ def test_streamed_fit_equals_one_batch(tiny_batches):
         )
 
 
+def test_memo_keeps_the_latest_used_of_each_size(monkeypatch):
+    """Evaluations (O(N) arrays) and reductions (small) are evicted each within their own
+    budget, least recently used first: the fit's start must survive its solver's steps."""
+    monkeypatch.setattr(problem_module, "MEMO", 3)
+    monkeypatch.setattr(problem_module, "MEMO_SMALL", 2)
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 5, seed=0)
+    problem = problem_module.Problem(robot, q, np.zeros((5, 3)), np.ones((5, 3)), ["a2"])
+    for i in range(3):
+        problem._memoised(("points", i), lambda: np.zeros(3))
+    problem._memoised(("reduced", 0), lambda: "small")
+    problem._memoised(("points", 0), lambda: pytest.fail("evicted"))  # used again: latest
+    for i in range(3, 5):
+        problem._memoised(("points", i), lambda: np.zeros(3))
+    problem._memoised(("reduced", 1), lambda: "small")
+    assert sorted(k for k in problem._memo if k[0] == "points") == [
+        ("points", 0),
+        ("points", 3),
+        ("points", 4),
+    ]
+    assert sorted(k for k in problem._memo if k[0] == "reduced") == [("reduced", 0), ("reduced", 1)]
+
+
 def test_reduction_keeps_what_the_tall_system_holds():
     """Folded in pieces, R and Qᵀr give lstsq's answer, the residual and the singular
     values of the tall system, also for a blind (rank-deficient) column pair."""

@@ -214,7 +214,7 @@ def identify(
         standard_errors=se,
         covariance=cov,
         residuals=frame.vectors_out(point_residuals).reshape(-1, 3),
-        residuals_before=(y - robot.measured_points(q)).reshape(-1, 3),
+        residuals_before=_before(make, robot, names, frame, y, q),
         orientation_residuals=frame.vectors_out(est.orientation_residuals(x0)),
         outliers=got.outliers,
         loss=loss
@@ -247,6 +247,14 @@ def identify(
         still_joints=got.facts.still,
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+def _before(make, robot, names, frame, y, q) -> np.ndarray:
+    """Measured minus nominal points, (N·m, 3), m: from the fit's memo where the fit frame
+    is the instrument's (the nominal robot is often where the fit started)."""
+    if frame.is_identity:
+        return make(robot, names=names).point_residuals(np.zeros(len(names))).reshape(-1, 3)
+    return (y - robot.measured_points(q)).reshape(-1, 3)
 
 
 SHARED_PROBLEMS = 3

@@ -23,8 +23,12 @@ from .linalg import Reduction
 BATCH_POSES = 4096
 """Poses per batch of `Problem.reduced`: a batch's Jacobian (3 · 4096 × k) stays in cache."""
 
-MEMO = 8
-"""Evaluations kept per memo: point evaluations are O(N), reductions O(k²)."""
+MEMO = 10
+"""Point evaluations (O(N) each) a memo keeps: a fit's start, its solver's trial points
+and where it ends, so that the audit finds the start and the end again."""
+
+MEMO_SMALL = 64
+"""Reductions and normal equations (O(k²) each) a memo keeps."""
 
 
 class Problem:
@@ -124,8 +128,10 @@ class Problem:
         value = self._memo.pop(key, None)
         if value is None:
             value = compute()
-            while len(self._memo) >= MEMO:
-                self._memo.pop(next(iter(self._memo)))
+            large = isinstance(value, np.ndarray)
+            same = [k for k, v in self._memo.items() if isinstance(v, np.ndarray) == large]
+            for old in same[: max(len(same) + 1 - (MEMO if large else MEMO_SMALL), 0)]:
+                del self._memo[old]  # the least recently used of its size
         self._memo[key] = value  # the latest used last
         return value
 
