@@ -91,6 +91,31 @@ def test_memo_keeps_the_latest_used_of_each_size(monkeypatch):
     assert sorted(k for k in problem._memo if k[0] == "reduced") == [("reduced", 0), ("reduced", 1)]
 
 
+def test_a_residual_ahead_brings_the_normal_equations_of_its_point(tiny_batches):
+    """One pass of points and Jacobian gives the residual and the normal equations that
+    separate passes give, and the solver's next step finds them without a pass."""
+    robot = cc.load_robot("puma560").with_points([[0.02, 0.01, 0.08], [0.0, 0.05, 0.1]])
+    q = cc.poses.uniform(robot, 60, seed=5)
+    meas = cc.simulate(robot.with_deviations({"a2": 2e-4, "alpha3": 1e-4}), q, noise=2e-5)
+    names = ["a2", "d3", "alpha3", "theta4"]
+    w = np.full((60, 3), 1 / 2e-5)
+
+    def fresh():
+        return problem_module.Problem(robot, q, meas.positions, w, names)
+
+    x = np.array([1e-4, -2e-4, 5e-5, 1e-4])
+    ahead, plain = fresh(), fresh()
+    r_ahead, r_plain = ahead.residual(x, ahead=True), plain.residual(x)
+    assert np.array_equal(r_ahead, r_plain)
+    G, g = plain._normal(plain.p(x), r_plain)
+    step = ahead.reduced(x, r_ahead, exact=False)
+    ahead._normal = lambda *a: pytest.fail("a second pass")
+    assert ahead.reduced(x, r_ahead, exact=False) is not None
+    R = Reduction.from_normal(G, g, r_plain @ r_plain, r_plain.size)
+    assert step.R == pytest.approx(R.R, rel=1e-12, abs=1e-9 * np.abs(R.R).max())
+    assert step.Qtr == pytest.approx(R.Qtr, rel=1e-12, abs=1e-9 * np.abs(R.Qtr).max())
+
+
 def test_reduction_keeps_what_the_tall_system_holds():
     """Folded in pieces, R and Qᵀr give lstsq's answer, the residual and the singular
     values of the tall system, also for a blind (rank-deficient) column pair."""

@@ -171,7 +171,9 @@ class _DistanceProblem:
         v = p[self.m.pairs[:, 0]] - p[self.m.pairs[:, 1]]
         return v, np.linalg.norm(v, axis=1)
 
-    def residual(self, x):
+    def residual(self, x, ahead=False):
+        """Weighted distance residuals; `ahead` as `Problem.residual` (pairs are few:
+        nothing to evaluate ahead)."""
         _, d = self._geometry(x)
         return (self.m.distances - d) * self.w_flat
 

@@ -156,8 +156,17 @@ class Problem:
         R_model = self._evaluate("fk", self.p(x))[:, :3, :3]
         return rotation_vector(self.R @ np.swapaxes(R_model, 1, 2))
 
-    def residual(self, x: np.ndarray) -> np.ndarray:
-        """Weighted residuals, shape (N · rows per pose,), pose-major."""
+    def residual(self, x: np.ndarray, ahead: bool = False) -> np.ndarray:
+        """Weighted residuals, shape (N · rows per pose,), pose-major.
+
+        `ahead`: a solver's trial point it will likely step from next. Where the points are
+        not yet evaluated there, one pass evaluates them with the Jacobian and memoises the
+        normal equations too (`reduced(..., exact=False)` then finds them): the cost of a
+        Jacobian pass instead of a points pass plus a Jacobian pass.
+        """
+        key = ("points", self.robot.structure, self.p(x).tobytes())
+        if ahead and self.R is None and key not in self._memo:
+            self._points_and_normal(x)
         r = self.point_residuals(x).reshape(len(self.q), -1)
         if self.R is not None:
             r = np.hstack([r, self.orientation_residuals(x)])
@@ -166,7 +175,7 @@ class Problem:
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """Weighted ``∂f/∂x``, shape (N · rows per pose, k): whole, for small problems and
         tests; the solvers and the analysis use `reduced`."""
-        J = self._kernel_rows(self.p(x), slice(None))
+        J = self._kernel_rows(self.p(x), slice(None))[0]
         return J[:, self.take] if len(self.take) != J.shape[1] else J
 
     def reduced(self, x: np.ndarray, r: np.ndarray | None = None, exact=True) -> Reduction:
@@ -193,8 +202,7 @@ class Problem:
         whole = self._memo.get((*at, self.kernel_columns)) or self._from_wider(at)
         if whole is None and not exact:
             r = self.residual(x) if r is None else r
-            key = ("normal", *at[1:], self.kernel_columns)
-            G, g = self._memoised(key, lambda: self._normal(p, r))
+            G, g = self._memoised(self._normal_key(p), lambda: self._normal(p, r))
             take = self.take
             step = Reduction.from_normal(G[np.ix_(take, take)], g[take], r @ r, r.size)
             if step is not None:
@@ -232,48 +240,72 @@ class Problem:
         other.take = [kernel.index(n) for n in other.names]
         return other
 
+    def _normal_key(self, p: np.ndarray) -> tuple:
+        return ("normal", self.robot.structure, p.tobytes(), self._weights, self.kernel_columns)
+
     def _batches(self, p: np.ndarray):
-        """``(J, rows)`` per batch of poses: the weighted Jacobian rows and their slice of
-        the residual vector. The kernels evaluate the next batches in threads while the
-        caller reduces this one, into buffers that are reused: each J is valid until the
+        """``(J, f, poses, rows)`` per batch of poses: the weighted Jacobian rows, the
+        points (None with orientations), and the batch's slices of the poses and of the
+        residual vector. The kernels evaluate the next batches in threads while the caller
+        reduces this one, into buffers that are reused: each J and f is valid until the
         caller asks for the next."""
         n, per_pose = len(self.q), self.w_rows.shape[1]
         cuts = np.array_split(np.arange(n), max(n // BATCH_POSES, 1))
         batches = [slice(c[0], c[-1] + 1) for c in cuts]
         rows = [slice(b.start * per_pose, b.stop * per_pose) for b in batches]
-        shape = (len(cuts[0]), per_pose, len(self.kernel_columns))  # the first is the largest
-        jacobians = prefetched(
+        width = len(self.kernel_columns) + (self.R is None)  # the points' column
+        shape = (len(cuts[0]), per_pose, width)  # the first batch is the largest
+        evaluated = prefetched(
             lambda sl, buffer: self._kernel_rows(p, sl, buffer),
             batches,
             buffer=lambda: np.empty(shape),
         )
-        return zip(jacobians, rows, strict=True)
+        for (J, f), poses, batch_rows in zip(evaluated, batches, rows, strict=True):
+            yield J, f, poses, batch_rows
 
     def _reduce(self, p: np.ndarray, r: np.ndarray) -> Reduction:
-        batches = ((J, r[rows]) for J, rows in self._batches(p))
+        batches = ((J, r[rows]) for J, _, _, rows in self._batches(p))
         return Reduction.folded(len(self.kernel_columns), batches)
 
     def _normal(self, p: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(JᵀJ, Jᵀr)`` of every kernel column, (k, k) and (k,)."""
         k = len(self.kernel_columns)
         G, g = np.zeros((k, k)), np.zeros(k)
-        for J, rows in self._batches(p):
+        for J, _, _, rows in self._batches(p):
             G += J.T @ J
             g += J.T @ r[rows]
         return G, g
 
-    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None) -> np.ndarray:
-        """Weighted Jacobian rows of `poses`, every kernel column, (rows, k_kernel).
+    def _points_and_normal(self, x: np.ndarray) -> None:
+        """Memoise the points at `x` and the normal equations there, from one pass."""
+        p = self.p(x)
+        f = np.empty_like(self.y)  # (N, 3m)
+        k = len(self.kernel_columns)
+        G, g = np.zeros((k, k)), np.zeros(k)
+        for J, f_batch, poses, _ in self._batches(p):
+            f[poses] = f_batch
+            # as `residual` forms it, bit for bit
+            r = ((self.y[poses] - f_batch) * self.w_rows[poses]).ravel()
+            G += J.T @ J
+            g += J.T @ r
+        self._memoised(("points", self.robot.structure, p.tobytes()), lambda: f)
+        self._memoised(self._normal_key(p), lambda: (G, g))
 
-        Written into `buffer` (C-ordered, (n ≥ poses, rows per pose, k_kernel)) if given.
+    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None):
+        """Weighted Jacobian rows of `poses`, every kernel column, (rows, k_kernel), and
+        the unweighted points (n, 3m) (None with orientations), from one evaluation.
+
+        Written into `buffer` (C-ordered, (n ≥ poses, rows per pose, k_kernel + 1), or
+        k_kernel with orientations) if given.
         """
         q, k = self.q[poses], len(self.kernel_columns)
         out = None if buffer is None else buffer[: len(q)]
         if self.R is None:
-            J = self.chain.evaluate("points_jacobian", q, p, self.kernel_columns, out)
+            both = self.chain.evaluate("points_and_jacobian", q, p, self.kernel_columns, out)
+            J, f = both[:, :, :k], both[:, :, k]
         else:  # rotation rows under the points' rows
             J = self.chain.evaluate("points_jacobian", q, p, self.kernel_columns)  # (n, 3m, k)
             rot = self.chain.evaluate("pose_jacobian", q, p, self.kernel_columns)[:, 3:, :]
-            J = np.concatenate([J, rot], axis=1, out=out)
+            J, f = np.concatenate([J, rot], axis=1, out=out), None
         J *= self.w_rows[poses, :, None]  # J is this call's own (or the caller's buffer)
-        return J.reshape(-1, k)
+        return J.reshape(-1, k), f

@@ -76,7 +76,8 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
         t = 1.0
         while True:  # halve the step until the cost goes down (damped Gauss-Newton)
             x_new = x + t * step
-            r_new = problem.residual(x_new)
+            # a full step not yet converged is usually taken: its Jacobian comes too
+            r_new = problem.residual(x_new, ahead=t == 1.0 and not done)
             cost_new = 0.5 * r_new @ r_new
             if cost_new < cost or t < 1e-3 or done:
                 break

@@ -78,9 +78,15 @@ KINDS = (
     "pose_jacobian",
     "points",
     "points_jacobian",
+    "points_and_jacobian",
     "joint_jacobian",
 )
-PARAMETER_JACOBIANS = ("position_jacobian", "pose_jacobian", "points_jacobian")
+PARAMETER_JACOBIANS = (
+    "position_jacobian",
+    "pose_jacobian",
+    "points_jacobian",
+    "points_and_jacobian",
+)
 
 
 @dataclass(frozen=True)
@@ -344,9 +350,13 @@ class Chain:
                 W = ca.reshape(dR[:, i], 3, 3) @ R.T
                 rows.append(ca.vertcat(W[2, 1], W[0, 2], W[1, 0]))
             return ca.vertcat(ca.jacobian(position, q), ca.horzcat(*rows)).T
-        if kind in ("points", "points_jacobian"):
+        if kind in ("points", "points_jacobian", "points_and_jacobian"):
             points = self._points(T)
-            return points if kind == "points" else self._jacobian(points, columns).T
+            if kind == "points":
+                return points
+            J = self._jacobian(points, columns)
+            # the points as a last column: one pass gives a solver's residual and Jacobian
+            return (J if kind == "points_jacobian" else ca.horzcat(J, points)).T
         J = self._jacobian(position, columns)
         if kind == "position_jacobian":
             return J.T
@@ -377,7 +387,10 @@ class Chain:
 
         Parameters
         ----------
-        kind : {"fk", "position", "position_jacobian", "pose_jacobian"}
+        kind : str
+            One of `KINDS`: "fk", "position", "position_jacobian", "pose_jacobian",
+            "points", "points_jacobian" (3m × k per pose), "points_and_jacobian" (the
+            same with the points as a last column), "joint_jacobian".
         q : ndarray, shape (N, dof), float64
             Joint values (rad for R, m for P), already validated.
         p : ndarray, shape (n_params,), float64
@@ -391,7 +404,8 @@ class Chain:
 
         Returns
         -------
-        ndarray, shape (N, 4, 4), (N, 3), (N, 3, k) or (N, 6, k)
+        ndarray, shape (N, 4, 4), (N, 3), (N, 3, k), (N, 6, k), (N, 3m), (N, 3m, k),
+        (N, 3m, k + 1) or (N, 6, dof)
             `out` when given.
         """
         columns = tuple(columns)
@@ -406,6 +420,8 @@ class Chain:
                 every = tuple(range(len(self.names))) if jacobian else ()
                 value = self._evaluator(kind, every).compiled(q, self.extended(p))
                 if value is not None:
+                    if kind == "points_and_jacobian":  # and the points, the last column
+                        columns = (*columns, len(self.names))
                     value = value[..., list(columns)] if jacobian else value
                     return value if out is None else _into(out, value)
         return self._evaluator(kind, columns)(q, self.extended(p), out)
@@ -439,6 +455,7 @@ class Chain:
             "pose_jacobian": (6, k),
             "points": (m3,),
             "points_jacobian": (m3, k),
+            "points_and_jacobian": (m3, k + 1),
             "joint_jacobian": (6, len(self.structure.joint_types)),
         }[kind]
 
