@@ -34,12 +34,22 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from . import _trig
+
 log = logging.getLogger(__name__)
 
-CFLAGS = ("-O3", "-fPIC", "-shared", "-fno-math-errno")
+CFLAGS = ("-O3", "-fPIC", "-shared", "-fno-math-errno", "-fno-trapping-math", "-ffp-contract=off")
+"""No errno and no floating-point traps to honour (the kernels enable none): GCC then turns
+the selects of the joint trigonometry into vector blends. No fused multiply-adds: the
+kernels round as numpy does (`casecal.model._trig`), so batch size never changes a bit."""
+
 
 _DRIVER = """
 const char* casecal_key(void) {{ return "{key}"; }}
+
+#define CASECAL_BLOCK 64
+static const long long casecal_tq[] = {{ {tq} }}; /* per joint angle: its column of q */
+static const long long casecal_tp[] = {{ {tp} }}; /* and its offset's index in p */
 
 int casecal_batch(const casadi_real* q, const casadi_real* p, casadi_real* out,
                   long long n_poses) {{
@@ -47,12 +57,25 @@ int casecal_batch(const casadi_real* q, const casadi_real* p, casadi_real* out,
   casadi_real* res[{sz_res}];
   casadi_int iw[{sz_iw}];
   casadi_real w[{sz_w}];
-  long long k;
-  for (k = 0; k < n_poses; ++k) {{
-    arg[0] = q + k * {n_q};
-    arg[1] = p;
-    res[0] = out + k * {n_out};
-    if ({name}(arg, res, iw, w, 0)) return 1;
+  casadi_real qe[CASECAL_BLOCK * {n_qe}], c[CASECAL_BLOCK], s[CASECAL_BLOCK];
+  long long k0, i, m, t, nb;
+  for (k0 = 0; k0 < n_poses; k0 += CASECAL_BLOCK) {{
+    nb = n_poses - k0 < CASECAL_BLOCK ? n_poses - k0 : CASECAL_BLOCK;
+    for (i = 0; i < nb; ++i)
+      for (m = 0; m < {n_q}; ++m) qe[i * {n_qe} + m] = q[(k0 + i) * {n_q} + m];
+    for (t = 0; t < {n_t}; ++t) {{  /* the joints' cos and sin, a block at a time */
+      casecal_joint_trig(q + k0 * {n_q} + casecal_tq[t], {n_q}, p[casecal_tp[t]], nb, c, s);
+      for (i = 0; i < nb; ++i) {{
+        qe[i * {n_qe} + {n_q} + t] = c[i];
+        qe[i * {n_qe} + {n_q} + {n_t} + t] = s[i];
+      }}
+    }}
+    for (i = 0; i < nb; ++i) {{
+      arg[0] = qe + i * {n_qe};
+      arg[1] = p;
+      res[0] = out + (k0 + i) * {n_out};
+      if ({name}(arg, res, iw, w, 0)) return 1;
+    }}
   }}
   return 0;
 }}
@@ -72,22 +95,39 @@ def compiler() -> str | None:
     return None
 
 
-def source(function: ca.Function, key: str = "") -> str:
-    """C source of `function` plus the batch driver, which also exports `key`."""
+def source(function: ca.Function, key: str = "", n_q: int | None = None, joint_trig=()) -> str:
+    """C source of `function` plus the batch driver, which also exports `key`.
+
+    The driver takes `n_q` values per pose (default: the function's first input) and
+    appends the cos and sin of each `joint_trig` angle ``q[:, column] + p[index]`` (for
+    `casecal.model.kinematics.Chain.joint_trig`) before calling `function` on each pose.
+    """
     with tempfile.TemporaryDirectory() as tmp:
         gen = ca.CodeGenerator("kernel.c", {"with_header": False})
         gen.add(function)
         gen.generate(tmp + os.sep)
         text = Path(tmp, "kernel.c").read_text()
-    return text + _DRIVER.format(
-        key=key,
-        name=function.name(),
-        sz_arg=max(function.sz_arg(), 1),
-        sz_res=max(function.sz_res(), 1),
-        sz_iw=max(function.sz_iw(), 1),
-        sz_w=max(function.sz_w(), 1),
-        n_q=function.nnz_in(0),
-        n_out=function.nnz_out(0),
+    n_qe = function.nnz_in(0)
+    n_q = n_qe if n_q is None else n_q
+    if n_qe != n_q + 2 * len(joint_trig):
+        raise ValueError("internal error: the function's input is not q, cos and sin")
+    return (
+        text
+        + _trig.C_SOURCE
+        + _DRIVER.format(
+            key=key,
+            name=function.name(),
+            sz_arg=max(function.sz_arg(), 1),
+            sz_res=max(function.sz_res(), 1),
+            sz_iw=max(function.sz_iw(), 1),
+            sz_w=max(function.sz_w(), 1),
+            n_q=n_q,
+            n_qe=n_qe,
+            n_t=len(joint_trig),
+            tq=", ".join(str(c) for c, _ in joint_trig) or "0",
+            tp=", ".join(str(k) for _, k in joint_trig) or "0",
+            n_out=function.nnz_out(0),
+        )
     )
 
 
@@ -98,7 +138,7 @@ def fingerprint() -> str:
     if _FINGERPRINT is None:
         here = Path(__file__).parent
         # parameters.py fixes the layout of p: a change there must not reuse old kernels
-        files = ("kinematics.py", "_native.py", "parameters.py")
+        files = ("kinematics.py", "_native.py", "_trig.py", "parameters.py")
         text = "".join((here / f).read_text() for f in files)
         text += ca.__version__ + " ".join(CFLAGS)
         _FINGERPRINT = hashlib.sha256(text.encode()).hexdigest()
@@ -108,7 +148,7 @@ def fingerprint() -> str:
 _FINGERPRINT: str | None = None
 
 
-def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
+def kernel(key, build_function, n_q: int, n_p: int, n_out: int, joint_trig=()):
     """A batch callable ``(q (N, n_q), p (n_p,), out) -> None`` in C, or None.
 
     Parameters
@@ -120,6 +160,8 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
         Returns the one-pose CasADi Function; called only when the library must be built.
     n_q, n_p, n_out : int
         Input and per-pose output sizes, checked on every call.
+    joint_trig : tuple of (int, int)
+        Joint angles whose cos and sin the driver computes (`source`).
     """
     digest = hashlib.sha256((fingerprint() + repr(key)).encode()).hexdigest()[:24]
     lib_path = cache_dir() / f"casecal_{digest}.so"
@@ -130,7 +172,7 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int):
             if cc is None:
                 _say_once("no C compiler found; evaluating with numpy (casecal.model._vectorised)")
                 return None
-            _build(cc, source(build_function(), digest), lib_path)
+            _build(cc, source(build_function(), digest, n_q, joint_trig), lib_path)
             lib = _load(lib_path, digest)
         if lib is None:
             raise OSError(f"the kernel just built at {lib_path} does not verify")

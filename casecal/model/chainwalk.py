@@ -32,13 +32,15 @@ class Walk:
     bodies: list
 
 
-def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None) -> Walk:
+def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None, joint_trig=None) -> Walk:
     """Walk `structure` from `base` with effective joint variables `q_eff` (list of SX);
-    `after[i]`, when given and not None, is applied after joint i's link."""
+    `after[i]`, when given and not None, is applied after joint i's link; `joint_trig[i]`,
+    when given and not None, is (cos, sin) of revolute joint i's angle (offset included)."""
     from .kinematics import frame_transform, joint_motion, link_transform
 
     T, axes, points, bodies = base, [], [], []
     after = after or [None] * len(q_eff)
+    joint_trig = joint_trig or [None] * len(q_eff)
     if structure.convention == "urdf":
         passive = structure.passive or ((),) * len(q_eff)
         for jt, name, axis, q, before in zip(
@@ -61,7 +63,7 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None) -> Walk
             axes.append(origin[:3, :3] @ ca.DM(axis))
             points.append(origin[:3, 3])
             angle = q + P[f"{name}.offset"] if jt == "R" else q
-            T = origin @ joint_motion(jt, axis, angle)
+            T = origin @ joint_motion(jt, axis, angle, joint_trig[len(bodies)])
             T = T if after[len(bodies)] is None else T @ after[len(bodies)]
             bodies.append(T)
         return Walk(T, axes, points, bodies)
@@ -75,6 +77,7 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None) -> Walk
             P[f"a{i}"],
             trig[f"alpha{i}"],
             trig.get(f"beta{i}"),
+            joint_trig[i - 1],
         )
         link_after = T @ link
         # standard DH turns link i about z of frame i-1; modified DH about z of frame i
