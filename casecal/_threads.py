@@ -73,35 +73,6 @@ def thread_map(func, items: list) -> list:
     return list(pool.map(functools.partial(_inside, func), items))
 
 
-def prefetched(func, items: list, buffer=None):
-    """Yield ``func(item)`` for `items` in order, computed ahead in `cores` threads while
-    the caller works on the current one: a pipeline, e.g. kernels evaluating the next
-    batches of poses while LAPACK folds this one (LAPACK stays in the caller's thread:
-    OpenBLAS called from two threads at once contends for its buffers).
-
-    With `buffer` (a callable making one), ``func(item, buffer)`` gets one of a ring of
-    buffers, one per item in flight plus the caller's: a value that lives in its buffer is
-    valid until the caller asks for the next one.
-    """
-    depth = cores()
-    pool = _pool() if len(items) > 1 else None
-    ring = [buffer() for _ in range(min(len(items), depth + 1 if pool else 1))] if buffer else []
-
-    def job(i: int):
-        return (func, items[i], ring[i % len(ring)]) if ring else (func, items[i])
-
-    if pool is None:
-        yield from (_call(*job(i)) for i in range(len(items)))
-        return
-    ahead = [pool.submit(_inside, *job(i)) for i in range(min(depth, len(items)))]
-    for i in range(len(items)):
-        value = ahead.pop(0).result()
-        if i + depth < len(items):
-            # the buffer of item i - 1, which the caller has given back by asking for i
-            ahead.append(pool.submit(_inside, *job(i + depth)))
-        yield value
-
-
 def _pool() -> ThreadPoolExecutor | None:
     """The shared thread pool, or None where threads would not help (one core, or a pool
     thread itself, which must not wait on the pool: deadlock)."""
@@ -122,8 +93,4 @@ _INSIDE = threading.local()
 
 def _inside(func, *args):
     _INSIDE.pool = True
-    return func(*args)
-
-
-def _call(func, *args):
     return func(*args)

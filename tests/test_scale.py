@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
-from casecal._threads import prefetched, thread_map
+from casecal._threads import thread_map
 from casecal.identification import problem as problem_module
 from casecal.identification.linalg import Reduction
 
@@ -116,6 +116,28 @@ def test_a_residual_ahead_brings_the_normal_equations_of_its_point(tiny_batches)
     assert step.Qtr == pytest.approx(R.Qtr, rel=1e-12, abs=1e-9 * np.abs(R.Qtr).max())
 
 
+def test_a_qr_pass_rounds_the_same_on_any_number_of_cores(tiny_batches, monkeypatch):
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 200, seed=6)
+    meas = cc.simulate(robot.with_deviations({"a2": 2e-4}), q, noise=2e-5, seed=7)
+    problem = problem_module.Problem(
+        robot, q, meas.positions, np.full((200, 3), 5e4), robot.parameter_names
+    )
+    x = np.zeros(len(robot.parameter_names))
+    r, p = problem.residual(x), problem.p(x)
+    folds = []
+    for threads in ("1", "2", "3"):
+        monkeypatch.setenv("CASECAL_THREADS", threads)
+        folds.append(problem._reduce(p, r))
+    for other in folds[1:]:
+        assert np.array_equal(other.R, folds[0].R) and np.array_equal(other.Qtr, folds[0].Qtr)
+    whole = Reduction.of(problem.jacobian(x), r)
+    s_whole = np.linalg.svd(whole.R, compute_uv=False)
+    assert np.linalg.svd(folds[0].R, compute_uv=False) == pytest.approx(
+        s_whole, rel=1e-9, abs=1e-9 * s_whole[0]
+    )
+
+
 def test_reduction_keeps_what_the_tall_system_holds():
     """Folded in pieces, R and Qᵀr give lstsq's answer, the residual and the singular
     values of the tall system, also for a blind (rank-deficient) column pair."""
@@ -145,28 +167,6 @@ def test_thread_map_keeps_order_and_does_not_deadlock_when_nested():
         return sum(thread_map(lambda j: i * j, list(range(5))))
 
     assert thread_map(inner, list(range(8))) == [10 * i for i in range(8)]
-
-
-@pytest.mark.parametrize("threads", ["1", "2"])
-def test_prefetched_never_overwrites_the_buffer_the_caller_holds(threads, monkeypatch):
-    """Workers run ahead into a ring of buffers; the value the caller holds must stay put
-    while the caller works on it (a ring one too small would overwrite it)."""
-    import time
-
-    monkeypatch.setenv("CASECAL_THREADS", threads)
-    rng = np.random.default_rng(0)
-    delays = rng.uniform(0, 2e-3, size=40)
-
-    def fill(i, buffer):
-        time.sleep(delays[i] / 4)
-        buffer[:] = i
-        return buffer
-
-    seen = []
-    for i, value in enumerate(prefetched(fill, list(range(40)), buffer=lambda: np.empty(50))):
-        time.sleep(delays[-1 - i])  # the caller's work, while workers run ahead
-        seen.append(bool(np.all(value == i)))
-    assert all(seen)
 
 
 def test_kernels_write_into_a_given_buffer():

@@ -137,9 +137,12 @@ class Reduction:
         much as the factorisation."""
         red, work = cls.empty(k), None
         for J, r in batches:
-            if work is None or work.shape[0] < k + J.shape[0]:
-                work = np.empty((k + J.shape[0], k + 1), order="F")
-            red = red.fold(J, r, work)
+            for start in range(0, J.shape[0], FOLD_ROWS):
+                rows = slice(start, start + FOLD_ROWS)
+                m = len(r[rows])
+                if work is None or work.shape[0] < k + m:
+                    work = np.empty((k + m, k + 1), order="F")
+                red = red.fold(J[rows], r[rows], work)
         return red
 
     def merge(self, other: Reduction) -> Reduction:
@@ -172,6 +175,10 @@ class Reduction:
         z = Vt[keep].T @ (proj / s[keep])
         return z / norms, 0.5 * float(proj @ proj)
 
+
+FOLD_ROWS = 3072
+"""Rows folded per factorisation in `Reduction.folded`: the work array stays in the
+cache (taller ones are 15 % slower per row; the R factor folded again costs 1 %)."""
 
 NORMAL_CONDITION = 1e5
 """Largest condition number of the column-scaled Jacobian for which a solver's step may

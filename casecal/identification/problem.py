@@ -14,7 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from .._threads import prefetched
+from .._threads import thread_map
 from ..model import kinematics
 from ..model.frames import rotation_vector
 from ..model.robot import Robot
@@ -22,6 +22,9 @@ from .linalg import Reduction
 
 BATCH_POSES = 4096
 """Poses per batch of `Problem.reduced`: a batch's Jacobian (3 · 4096 × k) stays in cache."""
+
+FOLD_RUNS = 4
+"""Runs of batches a QR pass folds independently, as many at once as there are cores."""
 
 MEMO = 10
 """Point evaluations (O(N) each) a memo keeps: a fit's start, its solver's trial points
@@ -243,51 +246,77 @@ class Problem:
     def _normal_key(self, p: np.ndarray) -> tuple:
         return ("normal", self.robot.structure, p.tobytes(), self._weights, self.kernel_columns)
 
-    def _batches(self, p: np.ndarray):
-        """``(J, f, poses, rows)`` per batch of poses: the weighted Jacobian rows, the
-        points (None with orientations), and the batch's slices of the poses and of the
-        residual vector. The kernels evaluate the next batches in threads while the caller
-        reduces this one, into buffers that are reused: each J and f is valid until the
-        caller asks for the next."""
+    def _cuts(self) -> tuple[list[slice], list[slice], tuple[int, int, int]]:
+        """The batches' slices of the poses and of the residual vector, and the shape of a
+        buffer for one batch's kernel output."""
         n, per_pose = len(self.q), self.w_rows.shape[1]
         cuts = np.array_split(np.arange(n), max(n // BATCH_POSES, 1))
         batches = [slice(c[0], c[-1] + 1) for c in cuts]
         rows = [slice(b.start * per_pose, b.stop * per_pose) for b in batches]
         width = len(self.kernel_columns) + (self.R is None)  # the points' column
-        shape = (len(cuts[0]), per_pose, width)  # the first batch is the largest
-        evaluated = prefetched(
-            lambda sl, buffer: self._kernel_rows(p, sl, buffer),
-            batches,
-            buffer=lambda: np.empty(shape),
-        )
-        for (J, f), poses, batch_rows in zip(evaluated, batches, rows, strict=True):
-            yield J, f, poses, batch_rows
+        return batches, rows, (len(cuts[0]), per_pose, width)  # the first is the largest
+
+    def _runs(self, p: np.ndarray, each) -> list:
+        """``each(batches)`` for `FOLD_RUNS` runs of consecutive batches of poses at `p`,
+        in threads (as many at once as there are cores), in order of the runs.
+
+        `batches` yields ``(J, f, poses, rows)`` per batch of the run: the weighted
+        Jacobian rows, the points (None with orientations) and the batch's slices of the
+        poses and of the residual vector, evaluated in the run's thread into one reused
+        buffer (valid until the next is asked for). Each run's arithmetic, and the
+        caller's combination of the runs in order, is the same whatever the core count.
+        """
+        batches, rows, shape = self._cuts()
+
+        def run(indices):
+            buffer = np.empty(shape)
+            return each(
+                (*self._kernel_rows(p, batches[i], buffer), batches[i], rows[i]) for i in indices
+            )
+
+        runs = [run for run in np.array_split(np.arange(len(batches)), FOLD_RUNS) if run.size]
+        return thread_map(run, runs)
 
     def _reduce(self, p: np.ndarray, r: np.ndarray) -> Reduction:
-        batches = ((J, r[rows]) for J, _, _, rows in self._batches(p))
-        return Reduction.folded(len(self.kernel_columns), batches)
+        """The R factor of ``[J | r]`` at `p`, the runs' reductions merged in order."""
+        k = len(self.kernel_columns)
+        whole, *rest = self._runs(
+            p, lambda batches: Reduction.folded(k, ((J, r[rows]) for J, _, _, rows in batches))
+        )
+        for part in rest:
+            whole = whole.merge(part)
+        return whole
 
     def _normal(self, p: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(JᵀJ, Jᵀr)`` of every kernel column, (k, k) and (k,)."""
-        k = len(self.kernel_columns)
-        G, g = np.zeros((k, k)), np.zeros(k)
-        for J, _, _, rows in self._batches(p):
-            G += J.T @ J
-            g += J.T @ r[rows]
-        return G, g
+
+        def gram(batches):
+            k = len(self.kernel_columns)
+            G, g = np.zeros((k, k)), np.zeros(k)
+            for J, _, _, rows in batches:
+                G += J.T @ J
+                g += J.T @ r[rows]
+            return G, g
+
+        return _summed(self._runs(p, gram))
 
     def _points_and_normal(self, x: np.ndarray) -> None:
         """Memoise the points at `x` and the normal equations there, from one pass."""
         p = self.p(x)
-        f = np.empty_like(self.y)  # (N, 3m)
-        k = len(self.kernel_columns)
-        G, g = np.zeros((k, k)), np.zeros(k)
-        for J, f_batch, poses, _ in self._batches(p):
-            f[poses] = f_batch
-            # as `residual` forms it, bit for bit
-            r = ((self.y[poses] - f_batch) * self.w_rows[poses]).ravel()
-            G += J.T @ J
-            g += J.T @ r
+        f = np.empty_like(self.y)  # (N, 3m); each run writes its own poses
+
+        def gram(batches):
+            k = len(self.kernel_columns)
+            G, g = np.zeros((k, k)), np.zeros(k)
+            for J, f_batch, poses, _ in batches:
+                f[poses] = f_batch
+                # as `residual` forms it, bit for bit
+                r = ((self.y[poses] - f_batch) * self.w_rows[poses]).ravel()
+                G += J.T @ J
+                g += J.T @ r
+            return G, g
+
+        G, g = _summed(self._runs(p, gram))
         self._memoised(("points", self.robot.structure, p.tobytes()), lambda: f)
         self._memoised(self._normal_key(p), lambda: (G, g))
 
@@ -309,3 +338,11 @@ class Problem:
             J, f = np.concatenate([J, rot], axis=1, out=out), None
         J *= self.w_rows[poses, :, None]  # J is this call's own (or the caller's buffer)
         return J.reshape(-1, k), f
+
+
+def _summed(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """The runs' ``(G, g)`` added in order."""
+    G, g = parts[0]
+    for G_part, g_part in parts[1:]:
+        G, g = G + G_part, g + g_part
+    return G, g
