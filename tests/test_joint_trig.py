@@ -90,21 +90,22 @@ def _robots(tmp: Path):
 
 
 @pytest.mark.parametrize("name", ["dh", "mdh", "prismatic", "urdf", "urdf-mimic"])
-def test_joint_and_offset_jacobians_match_differences(name, tmp_path):
+@pytest.mark.parametrize("backend", ["c", "casadi"])
+def test_joint_and_offset_jacobians_match_differences(name, backend, tmp_path, monkeypatch):
     """∂/∂q and ∂/∂theta (URDF: the joint offset) reach the per-pose cos and sin by the
-    chain rule; compiled (300 poses) and not (5 poses), against central differences."""
+    chain rule, in the compiled kernels and in CasADi's own evaluation, against central
+    differences of the pose (position and rotation)."""
+    from test_jacobian import finite_difference_jacobians
+
     robot = _robots(tmp_path)[name]
     chain = kinematics.chain(robot.structure)
     assert chain.joint_trig, "the structure should take its joint angles' cos and sin"
-    for n in (300, 5):
-        q = cc.poses.uniform(robot, n, seed=1)
-        J = chain.evaluate("joint_jacobian", q, robot.vector())
-        FD = _joint_jacobian_by_differences(robot, q)
-        np.testing.assert_allclose(J, FD, rtol=0, atol=1e-7)
-        offsets = [chain.names[k] for _, k in chain.joint_trig]
-        Jp, names = robot.position_jacobian(q, offsets)
-        p = robot.parameters
-        for j, offset in enumerate(names):
-            plus = robot.with_parameters({offset: p[offset] + 1e-6}).position(q)
-            minus = robot.with_parameters({offset: p[offset] - 1e-6}).position(q)
-            np.testing.assert_allclose(Jp[:, :, j], (plus - minus) / 2e-6, rtol=0, atol=1e-7)
+    monkeypatch.setenv("CASECAL_BACKEND", backend)
+    q = cc.poses.uniform(robot, 300, seed=1)
+    J = chain.evaluate("joint_jacobian", q, robot.vector())
+    np.testing.assert_allclose(J, _joint_jacobian_by_differences(robot, q), rtol=0, atol=1e-7)
+    offsets = [chain.names[k] for _, k in chain.joint_trig]
+    Jx, names = robot.pose_jacobian(q, offsets)
+    FDp, FDr = finite_difference_jacobians(robot, q, names)
+    np.testing.assert_allclose(Jx[:, :3], FDp, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(Jx[:, 3:], FDr, rtol=0, atol=1e-7)

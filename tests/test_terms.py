@@ -350,6 +350,31 @@ def test_a_term_keys_its_kernels_the_same_in_every_process():
     assert runs[0] == runs[1]
 
 
+TABLE = np.zeros(3000)  # a module-level table a term reads
+
+
+def _reads_the_table(ctx, term, *, gain=1.0):
+    return gain * TABLE[1500] * ctx.q[1]
+
+
+def test_a_term_key_sees_its_tables_and_keyword_defaults():
+    """Kernels are cached on disk by the term function's key: a changed module-level
+    table (whose repr elides its middle) or keyword default must change the key."""
+    from casecal.model.terms import fingerprint
+
+    before = fingerprint(_reads_the_table)
+    TABLE[1500] = 1.0
+    try:
+        assert fingerprint(_reads_the_table) != before
+        table_changed = fingerprint(_reads_the_table)
+        _reads_the_table.__kwdefaults__["gain"] = 2.0
+        assert fingerprint(_reads_the_table) != table_changed
+    finally:
+        TABLE[1500] = 0.0
+        _reads_the_table.__kwdefaults__["gain"] = 1.0
+    assert fingerprint(_reads_the_table) == before
+
+
 def test_terms_cannot_shadow_the_robots_own_parameters():
     from casecal.model.terms import ErrorTerm
 

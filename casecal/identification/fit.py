@@ -258,15 +258,16 @@ def _before(make, robot, names, frame, y, q) -> np.ndarray:
 
 
 SHARED_PROBLEMS = 3
-"""Problems `_shared` keeps: each holds a few residual vectors of the data's size."""
+"""Problems `_shared` keeps for reuse (they share one memo; each holds its weights)."""
 
 
 def _shared(make):
-    """`make` returning the same `Problem` for the same robot and columns, so that the
-    rounds, the solver and the audit share its memoised residuals and reductions (a pass
-    over a million poses costs a second). Lives as long as one `identify` call."""
+    """`make` returning the same `Problem` for the same robot and columns, and Problems
+    that share one memo of evaluations and reductions, so that the rounds, the solver and
+    the audit evaluate a point once (a pass over a million poses costs a second). Lives as
+    long as one `identify` call."""
     kept: dict = {}
-    memo: dict = {}  # one for all: the same data, keyed by the whole parameter vector
+    memo: dict = {}  # one for all: the same data arrays, keyed by the parameter vector
 
     def shared(robot, names, kernel_names=None, **other):
         if other:

@@ -24,11 +24,13 @@ BATCH_POSES = 4096
 """Poses per batch of `Problem.reduced`: a batch's Jacobian (3 · 4096 × k) stays in cache."""
 
 FOLD_RUNS = 4
-"""Runs of batches a QR pass folds independently, as many at once as there are cores."""
+"""Runs of batches a pass over the poses (QR or normal equations) evaluates and reduces
+independently, as many at once as there are cores."""
 
 MEMO = 10
-"""Point evaluations (O(N) each) a memo keeps: a fit's start, its solver's trial points
-and where it ends, so that the audit finds the start and the end again."""
+"""Bytes of evaluations a memo keeps, in units of the measured points' (N · 3m doubles):
+ten point evaluations, a fit's start, its solver's trial points and where it ends, so that
+the audit finds the start and the end again (fewer of the larger poses, with orientations)."""
 
 MEMO_SMALL = 64
 """Reductions and normal equations (O(k²) each) a memo keeps."""
@@ -61,9 +63,10 @@ class Problem:
     w_rot : float
         Orientation weight 1/σ_rot, 1/rad.
     memo : dict, optional
-        Where evaluations and reductions are memoised, keyed by the whole parameter vector:
-        problems of the same data (same `q`, `y`, `w`) may share one, so that a point the
-        solver evaluated is not evaluated again by the analysis or the audit.
+        Where evaluations and reductions are memoised, keyed by the whole parameter vector
+        and the data arrays' identities: problems of the same data (the same `q`, `y`, `w`
+        and `orientations` arrays) share what they evaluate through one, so that a point
+        the solver evaluated is not evaluated again by the analysis or the audit.
     """
 
     def __init__(
@@ -97,8 +100,13 @@ class Problem:
         if orientations is not None:
             self.w_rows = np.hstack([self.w_rows, np.full((n, 3), self.w_rot)])
         self.w_flat = self.w_rows.ravel()
-        self._memo = {} if memo is None else memo  # (kind, p bytes[, weights]) -> value
-        self._weights = "data"  # identifies the weights in memo keys; reweighted: its own
+        # keys: (kind, structure, data, p bytes[, kernel columns]); the data part names the
+        # arrays (poses for evaluations, all of them and the weights for reductions), so
+        # problems of other data never meet in a shared memo; a reweighted copy, its own
+        self._memo = {} if memo is None else memo
+        self._poses = _identity(q)
+        self._weights = (self._poses, _identity(self.y), _identity(w), _identity(orientations))
+        self._weights += (self.w_rot,)
 
     def reweighted(self, point_weights: np.ndarray) -> Problem:
         """The same problem with each measured point's rows scaled by √weight (N, m).
@@ -131,15 +139,31 @@ class Problem:
         value = self._memo.pop(key, None)
         if value is None:
             value = compute()
-            large = isinstance(value, np.ndarray)
-            same = [k for k, v in self._memo.items() if isinstance(v, np.ndarray) == large]
-            for old in same[: max(len(same) + 1 - (MEMO if large else MEMO_SMALL), 0)]:
-                del self._memo[old]  # the least recently used of its size
+            self._make_room(value)
         self._memo[key] = value  # the latest used last
         return value
 
+    def _make_room(self, value) -> None:
+        """Evict the least recently used entries of `value`'s size (`MEMO`, `MEMO_SMALL`)."""
+        if isinstance(value, np.ndarray):
+            budget = MEMO * self.y.nbytes
+            large = [(k, v.nbytes) for k, v in self._memo.items() if isinstance(v, np.ndarray)]
+            total = value.nbytes + sum(size for _, size in large)
+            for key, size in large:
+                if total <= budget:
+                    break
+                del self._memo[key]
+                total -= size
+        else:
+            small = [k for k, v in self._memo.items() if not isinstance(v, np.ndarray)]
+            for key in small[: max(len(small) + 1 - MEMO_SMALL, 0)]:
+                del self._memo[key]
+
+    def _evaluation_key(self, kind: str, p: np.ndarray) -> tuple:
+        return (kind, self.robot.structure, self._poses, p.tobytes())
+
     def _evaluate(self, kind: str, p: np.ndarray) -> np.ndarray:
-        key = (kind, self.robot.structure, p.tobytes())
+        key = self._evaluation_key(kind, p)
         return self._memoised(key, lambda: self.chain.evaluate(kind, self.q, p))
 
     def p(self, x: np.ndarray) -> np.ndarray:
@@ -167,7 +191,7 @@ class Problem:
         normal equations too (`reduced(..., exact=False)` then finds them): the cost of a
         Jacobian pass instead of a points pass plus a Jacobian pass.
         """
-        key = ("points", self.robot.structure, self.p(x).tobytes())
+        key = self._evaluation_key("points", self.p(x))
         if ahead and self.R is None and key not in self._memo:
             self._points_and_normal(x)
         r = self.point_residuals(x).reshape(len(self.q), -1)
@@ -317,7 +341,7 @@ class Problem:
             return G, g
 
         G, g = _summed(self._runs(p, gram))
-        self._memoised(("points", self.robot.structure, p.tobytes()), lambda: f)
+        self._memoised(self._evaluation_key("points", p), lambda: f)
         self._memoised(self._normal_key(p), lambda: (G, g))
 
     def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None):
@@ -346,3 +370,12 @@ def _summed(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.
     for G_part, g_part in parts[1:]:
         G, g = G + G_part, g + g_part
     return G, g
+
+
+def _identity(a) -> tuple | None:
+    """What names an array in memo keys: its memory, shape, strides and type (None: None).
+    Arrays of one `identify` live as long as its memo, so the address is not reused."""
+    if a is None:
+        return None
+    a = np.asarray(a)
+    return (a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)

@@ -47,7 +47,7 @@ kernels round as numpy does (`casecal.model._trig`), so batch size never changes
 _DRIVER = """
 const char* casecal_key(void) {{ return "{key}"; }}
 
-#define CASECAL_BLOCK 64
+#define CASECAL_BLOCK {block} /* poses per block: the block's inputs stay under 32 kB */
 static const long long casecal_tq[] = {{ {tq} }}; /* per joint angle: its column of q */
 static const long long casecal_tp[] = {{ {tp} }}; /* and its offset's index in p */
 
@@ -123,6 +123,7 @@ def source(function: ca.Function, key: str = "", n_q: int | None = None, joint_t
             sz_w=max(function.sz_w(), 1),
             n_q=n_q,
             n_qe=n_qe,
+            block=max(1, min(64, 4096 // max(n_qe, 1))),
             n_t=len(joint_trig),
             tq=", ".join(str(c) for c, _ in joint_trig) or "0",
             tp=", ".join(str(k) for _, k in joint_trig) or "0",
@@ -138,7 +139,8 @@ def fingerprint() -> str:
     if _FINGERPRINT is None:
         here = Path(__file__).parent
         # parameters.py fixes the layout of p: a change there must not reuse old kernels
-        files = ("kinematics.py", "_native.py", "_trig.py", "parameters.py")
+        files = ("kinematics.py", "chainwalk.py", "terms.py", "_native.py", "_trig.py")
+        files += ("parameters.py",)
         text = "".join((here / f).read_text() for f in files)
         text += ca.__version__ + " ".join(CFLAGS)
         _FINGERPRINT = hashlib.sha256(text.encode()).hexdigest()
@@ -188,8 +190,8 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int, joint_trig=()):
         p = np.ascontiguousarray(p, dtype=float)
         if q.shape[1:] != (n_q,) or p.shape != (n_p,) or out.size != q.shape[0] * n_out:
             raise ValueError("internal error: buffer sizes do not match the kernel")
-        if not out.flags.c_contiguous:
-            raise ValueError("internal error: output buffer must be C-contiguous")
+        if out.dtype != np.float64 or not (out.flags.c_contiguous and out.flags.writeable):
+            raise ValueError("internal error: output must be writeable C-contiguous float64")
         status = batch(q.ctypes.data, p.ctypes.data, out.ctypes.data, q.shape[0])
         if status:
             raise RuntimeError(f"compiled kernel {key} returned status {status}")

@@ -11,7 +11,7 @@ and for inf and nan, both fall back to the library functions.
 
 `cos_sin` is the same arithmetic in numpy, operation for operation, so a pose gives the
 same bits whichever backend or batch size evaluates it (the kernels are compiled without
-fused multiply-adds for that).
+fused multiply-adds for that). One difference from the library: sin(-0.0) is +0.0.
 """
 
 from __future__ import annotations

@@ -535,8 +535,8 @@ class Chain:
 
 
 def _into(out: np.ndarray, value: np.ndarray) -> np.ndarray:
-    if out.shape != value.shape:
-        raise ValueError(f"out must be of shape {value.shape}, not {out.shape}")
+    if out.shape != value.shape or out.dtype != np.float64:
+        raise ValueError(f"out must be float64 of shape {value.shape}, not {out.shape}")
     out[...] = value
     return out
 
@@ -563,8 +563,14 @@ class _Evaluator:
 
     def __call__(self, q: np.ndarray, p: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         n = q.shape[0]
-        if out is not None and (out.shape != (n, *self.shape) or not out.flags.c_contiguous):
-            raise ValueError(f"out must be C-contiguous of shape {(n, *self.shape)}")
+        if out is not None and (
+            out.shape != (n, *self.shape)
+            or out.dtype != np.float64
+            or not (out.flags.c_contiguous and out.flags.writeable)
+        ):
+            raise ValueError(
+                f"out must be writeable C-contiguous float64 of shape {(n, *self.shape)}"
+            )
         if self._use_native(n, p.size):
             out = np.empty((n, *self.shape)) if out is None else out
             # the C loop releases the GIL: large batches run on every core, in chunks

@@ -153,15 +153,38 @@ def fingerprint(function, _depth: int = 0) -> str:
         parts = (function.func, function.args, function.keywords)
     elif hasattr(function, "__code__"):
         closure = [c.cell_contents for c in (function.__closure__ or ())]
-        parts = (function.__code__, function.__defaults__, closure)
+        # module-level numbers and arrays the code reads are part of what it computes
+        names = _names(function.__code__)
+        module = getattr(function, "__globals__", {})
+        read = [(n, module[n]) for n in sorted(names) if _is_data(module.get(n))]
+        parts = (function.__code__, function.__defaults__, function.__kwdefaults__, closure, read)
     else:
         return repr(function)
     text = repr(_stable(parts, _depth + 1))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def _names(code: types.CodeType) -> set[str]:
+    """The global names `code` and the code nested in it read."""
+    names = set(code.co_names)
+    for c in code.co_consts:
+        if isinstance(c, types.CodeType):
+            names |= _names(c)
+    return names
+
+
+def _is_data(value) -> bool:
+    return isinstance(value, (numbers.Number, str, bytes, np.ndarray)) or (
+        isinstance(value, (tuple, list)) and all(_is_data(v) for v in value)
+    )
+
+
 def _stable(value, depth: int):
-    """`value` with code objects and functions replaced by what defines them."""
+    """`value` with code objects and functions replaced by what defines them, and arrays
+    by a hash of their bytes (their repr elides the middle of a long one)."""
+    if isinstance(value, np.ndarray):
+        digest = hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest()
+        return ("array", value.dtype.str, value.shape, digest)
     if isinstance(value, types.CodeType):
         return (value.co_code, _stable(value.co_consts, depth), value.co_names)
     if isinstance(value, (tuple, list)):
