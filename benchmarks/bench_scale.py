@@ -163,9 +163,12 @@ def main():
         f"{'poses':>9} | {'theta/a/d/alpha':>17} | {'all':>17} | {'numpy GN':>15} | ratio | "
         f"{'no compiler':>17} | ratio"
     )
-    warm = make_data(2000, folder)
+    # compile the kernels once, outside the timings: the data of 1e4 poses and more need
+    # the same ones (two rounds), smaller sets may settle in one round with others
+    warm = make_data(10000, folder)
     for what in ("dh", "all"):
-        run_child(what, warm)  # compile the kernels once, outside the timings
+        for backend in ("auto", "numpy"):
+            run_child(what, warm, backend)
     for n in (int(s) for s in args.sizes):
         data = make_data(n, folder)
         t_dh, m_dh, ok_dh = run_child("dh", data)
