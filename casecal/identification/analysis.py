@@ -16,6 +16,10 @@ from ..errors import CalibrationError
 from ..model.parameters import UNITS, select, unit
 from ..model.robot import Robot, check_joint_values
 
+NULL_SHARE = 1e-6
+"""Share of a unit null vector (scaled columns) below which a parameter is not counted in
+that blind direction: ten times the rank tolerance's shares, far above rounding."""
+
 RANK_TOLERANCE = 1e-8
 """Relative singular-value threshold of the scaled Jacobian below which a direction is blind.
 
@@ -185,7 +189,12 @@ def analyse(J: np.ndarray, names, n_poses: int, tolerance: float = RANK_TOLERANC
     rank = int(np.sum(s > tolerance * s_max)) if s_max > 0 else 0
 
     live = [n for n, z in zip(names, zero, strict=True) if not z]
-    blind_rows = _rref(null.T, 1e-9) if null.size else np.zeros((0, len(live)))
+    # a parameter takes part in a blind direction where its share of the unit null vectors
+    # is more than rounding of the near-dependency: at a fitted robot an exact dependency
+    # (d2, d3 along parallel axes) is tilted a little and smears 1e-8 shares over every
+    # parameter, which would name them all blind and lead the text with one of them
+    support = np.where(np.abs(null) > NULL_SHARE, null, 0.0)
+    blind_rows = _rref(support.T, 1e-9) if null.size else np.zeros((0, len(live)))
     spots = [_zero_column_spot(n) for n, z in zip(names, zero, strict=True) if z]
     spots += _group_spots(blind_rows, live, J[:, ~zero])
     unident = {m for spot in spots for m in spot.members}
