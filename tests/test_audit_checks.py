@@ -176,3 +176,25 @@ def test_rows_pasted_twice_are_not_read_as_a_model_error():
     cal = cc.identify(robot, twice)
     assert cal.success, cal.message  # smoothness once compared each row with its copy
     assert "60 poses repeat earlier ones exactly" in str(cal.summary())
+
+
+def test_a_sigma_far_too_large_fails_and_says_so():
+    """σ in millimetres given as metres: the noise-aware rank held parameters the data
+    determine, and the robot is 0.78 mm off where 0.011 mm was reachable (found by an
+    adversarial try); a conservative σ, twice the noise, still passes."""
+    robot = cc.load_robot("puma560")
+    rng = np.random.default_rng(0)
+    truth = {
+        n: rng.normal()
+        * (0.05 * DEG if n.startswith(("theta", "alpha", "beta", "base_r", "tool_r")) else 0.5e-3)
+        for n in robot.parameter_names
+    }
+    true = robot.with_deviations(truth)
+    meas = cc.simulate(true, cc.poses.uniform(robot, 100, seed=0), noise=0.02e-3, seed=1)
+    wrong = cc.identify(robot, meas, "all", noise=0.02)  # 20 mm
+    assert not wrong.success
+    assert "smaller than the stated σ" in wrong.message
+    assert held_out_rms(wrong, true) > 0.3e-3  # why it must fail: the robot is off
+    conservative = cc.identify(robot, meas, "all", noise=0.04e-3)
+    assert conservative.success, conservative.message
+    assert held_out_rms(conservative, true) < 0.03e-3
