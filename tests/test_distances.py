@@ -129,3 +129,31 @@ def test_a_tool_off_the_wrist_axes_is_found_in_a_later_round(noise):
     q_new = cc.poses.uniform(robot, 300, seed=99)
     held_out = aligned_rms(cal.robot.position(q_new), true.position(q_new))
     assert held_out < (1e-9 if not noise else 1e-5)  # m
+
+
+def test_a_joint_that_never_moved_fails_the_distance_audit():
+    """Joint 6 still in every pose: the wrist's parameters are blind in these pairs and the
+    estimates absorb them, right only at q6 as measured (1.4 mm off across the workspace,
+    found by an adversarial try); the position path already failed such data."""
+    robot = cc.load_robot("puma560")
+    rng = np.random.default_rng(0)
+    angle = ("theta", "alpha", "beta", "base_r", "tool_r")
+    truth = {
+        n: rng.normal() * (np.radians(0.1) if n.startswith(angle) else 1e-3)
+        for n in robot.parameter_names
+    }
+    true = robot.with_deviations(truth)
+    q = cc.poses.uniform(robot, 80, seed=0)
+    q[:, 5] = 0.3
+    pairs = random_pairs(80, 400, 0)
+    cal = identify_distances(robot, simulate_distances(true, q, pairs, 2e-5, seed=0), "all")
+    assert not cal.success
+    assert "q6 = 17.189° in every pose" in cal.message
+    q_new = cc.poses.uniform(robot, 300, seed=5)
+    ends = random_pairs(300, 1000, 9)
+
+    def lengths(r):
+        p = r.position(q_new)
+        return np.linalg.norm(p[ends[:, 0]] - p[ends[:, 1]], axis=1)
+
+    assert np.sqrt(np.mean((lengths(cal.robot) - lengths(true)) ** 2)) > 0.5e-3  # why

@@ -22,10 +22,10 @@ from ..model.robot import Robot, check_joint_values
 from .analysis import analyse, represent, selection
 from .audit import Facts, audit, smoothness
 from .calibration import Calibration
-from .evidence import outside_gain
+from .evidence import outside_gain, still_joints
 from .fit import METHODS, check_iterations, verdict
 from .linalg import Reduction, gauss_newton_step
-from .rounds import MAX_ROUNDS
+from .rounds import MAX_ROUNDS, workspace_poses
 from .solvers import ROUNDING, SOLVERS, floor_cost
 from .uncertainty import uncertainty
 
@@ -260,6 +260,10 @@ def identify_distances(
             outside_gain=unasked.gain,
             outside_visible=unasked.n_visible,
             outside_leading=unasked.leading,
+            blind_here=_blind_only_here(
+                robot if method == "svd" else fit.robot, names, fit.estimated
+            ),
+            still=still_joints(measurements.q, robot),
         )
     )
     status, message = verdict(checks, fit.status, fit.message)
@@ -291,6 +295,26 @@ def identify_distances(
         measured="distances",
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+WORKSPACE_PAIRS = 800
+"""Pairs among the workspace poses on which `_blind_only_here` looks."""
+
+
+def _blind_only_here(robot: Robot, names, estimated) -> tuple[str, ...]:
+    """Asked-for parameters the measured pairs cannot tell from the estimated ones but
+    pairs across the joint ranges would (a joint that never moved): the distance twin of
+    `casecal.identification.evidence.blind_only_here`. Without joint limits, none."""
+    held = [n for n in names if n not in estimated]
+    q_work = workspace_poses(robot)
+    if q_work is None or not held:
+        return ()
+    pairs = random_pairs(len(q_work), WORKSPACE_PAIRS, seed=0)
+    ones = np.ones(len(pairs))
+    work = DistanceMeasurements(q_work, pairs, ones, ones)  # distances unused: Jacobian only
+    J = _DistanceProblem(robot, work, ones, list(names)).jacobian(np.zeros(len(names)))
+    elsewhere = analyse(J, names, len(pairs), prefer=list(estimated)).base_parameters
+    return tuple(n for n in held if n in elsewhere)
 
 
 @dataclass(frozen=True)
