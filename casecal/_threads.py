@@ -91,6 +91,6 @@ _CREATING = threading.Lock()
 _INSIDE = threading.local()
 
 
-def _inside(func, *args):
+def _inside(func, item):
     _INSIDE.pool = True
-    return func(*args)
+    return func(item)
