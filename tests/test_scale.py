@@ -238,7 +238,7 @@ def test_numpy_evaluation_without_a_compiler_equals_casadi(name, monkeypatch):
         monkeypatch.setenv("CASECAL_BACKEND", "casadi")
         reference = chain._evaluator(kind, columns)(q, chain.extended(robot.vector()))
         monkeypatch.setenv("CASECAL_BACKEND", "numpy")
-        got = kinematics._Evaluator(chain, kind, columns)(q, chain.extended(robot.vector()))
+        got = kinematics.Evaluator(chain, kind, columns)(q, chain.extended(robot.vector()))
         assert got.shape == reference.shape
         np.testing.assert_allclose(got, reference, rtol=1e-13, atol=1e-15, err_msg=kind)
 

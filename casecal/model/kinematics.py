@@ -37,8 +37,6 @@ and 3 parallel) it is ``beta2``.
 from __future__ import annotations
 
 import logging
-import os
-import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -47,9 +45,8 @@ from typing import NamedTuple
 import casadi as ca
 import numpy as np
 
-from .._threads import cores, thread_map
-from ..errors import CalibrationError
-from . import _native, _trig, _vectorised
+from . import _trig
+from ._evaluate import BUILDING, COMPILE_MIN_POSES, HOT_CALLS, Evaluator, write_into
 from .chainwalk import walk
 from .parameters import parameter_names, urdf_parameter_names
 
@@ -57,20 +54,6 @@ log = logging.getLogger(__name__)
 
 PARALLEL_TOLERANCE = 0.01
 """Consecutive axes with ``|sin(alpha)|`` below this count as parallel (about 0.57°)."""
-
-_BUILDING = threading.RLock()
-"""Held while a graph, Function or kernel is built: evaluations run on several threads."""
-
-COMPILE_MIN_POSES = 200
-"""Batches of at least this many poses use compiled C (when a C compiler is present)."""
-
-HOT_CALLS = 100
-"""Smaller batches of one chain and output kind, in one process, after which they too use
-compiled C: one kernel of every parameter column, its columns taken in numpy, so that the
-many column sets of repeated fits (a study's trials) share one compile per machine."""
-
-PARALLEL_POSES = 8192
-"""Batches of at least twice this many poses are split over threads (`thread_map`)."""
 
 KINDS = (
     "fk",
@@ -302,7 +285,7 @@ class Chain:
         A process whose compiled kernels are all in the disk cache never builds it.
         """
         if self._graph is None:
-            with _BUILDING:  # kernels run on several threads: one graph per chain
+            with BUILDING:  # kernels run on several threads: one graph per chain
                 if self._graph is None:
                     self._graph = self._build()
         return self._graph
@@ -497,15 +480,15 @@ class Chain:
                     if kind == "points_and_jacobian":  # and the points, the last column
                         columns = (*columns, len(self.names))
                     value = value[..., list(columns)] if jacobian else value
-                    return value if out is None else _into(out, value)
+                    return value if out is None else write_into(out, value)
         return self._evaluator(kind, columns)(q, self.extended(p), out)
 
-    def _evaluator(self, kind: str, columns: tuple[int, ...]) -> _Evaluator:
+    def _evaluator(self, kind: str, columns: tuple[int, ...]) -> Evaluator:
         key = (kind, columns)
         evaluator = self._evaluators.get(key)
         if evaluator is None:
-            with _BUILDING:
-                evaluator = self._evaluators.setdefault(key, _Evaluator(self, kind, columns))
+            with BUILDING:
+                evaluator = self._evaluators.setdefault(key, Evaluator(self, kind, columns))
         return evaluator
 
     def _points(self, T) -> ca.SX:
@@ -532,121 +515,6 @@ class Chain:
             "points_and_jacobian": (m3, k + 1),
             "joint_jacobian": (6, len(self.structure.joint_types)),
         }[kind]
-
-
-def _into(out: np.ndarray, value: np.ndarray) -> np.ndarray:
-    if out.shape != value.shape or out.dtype != np.float64:
-        raise ValueError(f"out must be float64 of shape {value.shape}, not {out.shape}")
-    out[...] = value
-    return out
-
-
-class _Evaluator:
-    """Batched evaluation of one kind of output: compiled C if possible, else CasADi."""
-
-    def __init__(self, chain: Chain, kind: str, columns: tuple[int, ...]):
-        self.chain, self.kind, self.columns = chain, kind, columns
-        self.shape = chain.output_shape(kind, len(columns))
-        self._function = None
-        self._native = None
-        self._native_tried = False
-        self._vectorised_fn = None
-        self._vectorised_tried = False
-
-    @property
-    def function(self) -> ca.Function:
-        if self._function is None:
-            with _BUILDING:
-                if self._function is None:
-                    self._function = self.chain.function(self.kind, self.columns)
-        return self._function
-
-    def __call__(self, q: np.ndarray, p: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        n = q.shape[0]
-        if out is not None and (
-            out.shape != (n, *self.shape)
-            or out.dtype != np.float64
-            or not (out.flags.c_contiguous and out.flags.writeable)
-        ):
-            raise ValueError(
-                f"out must be writeable C-contiguous float64 of shape {(n, *self.shape)}"
-            )
-        if self._use_native(n, p.size):
-            out = np.empty((n, *self.shape)) if out is None else out
-            # the C loop releases the GIL: large batches run on every core, in chunks
-            parts = max(min(n // PARALLEL_POSES, cores()), 1)
-            bounds = np.linspace(0, n, parts + 1).astype(int)
-
-            def run(i: int) -> None:
-                self._native(q[bounds[i] : bounds[i + 1]], p, out[bounds[i] : bounds[i + 1]])
-
-            thread_map(run, list(range(parts)))
-            return out
-        vectorised = self._vectorised(n)
-        if vectorised is not None:  # no compiler: numpy over all poses at once
-            value = vectorised(self.chain.inputs(q, p), p).reshape(n, *self.shape)
-        else:
-            # CasADi evaluates all N poses in one call when q has N times the expected
-            # columns; its output is the horizontal concatenation of the transposed
-            # per-pose outputs
-            res = np.asarray(self.function(self.chain.inputs(q, p).T, p), dtype=float)
-            value = res.T.copy() if len(self.shape) == 1 else res.T.reshape(n, *self.shape)
-        return value if out is None else _into(out, value)
-
-    def compiled(self, q: np.ndarray, p: np.ndarray) -> np.ndarray | None:
-        """The output by compiled C whatever the batch size, or None without a kernel."""
-        if not self._use_native(COMPILE_MIN_POSES, p.size):
-            return None
-        out = np.empty((q.shape[0], *self.shape))
-        self._native(q, p, out)
-        return out
-
-    def _vectorised(self, n: int):
-        """The numpy evaluator of the instruction list (`_vectorised`) where it serves."""
-        backend = backend_choice()
-        if backend == "casadi" or (backend == "auto" and n < COMPILE_MIN_POSES):
-            return None
-        if not self._vectorised_tried:
-            with _BUILDING:
-                if not self._vectorised_tried:
-                    try:
-                        self._vectorised_fn = _vectorised.Vectorised(self.function)
-                    except _vectorised.Unsupported as exc:
-                        log.info("numpy evaluation unavailable (%s); using CasADi's", exc)
-                    self._vectorised_tried = True
-        return self._vectorised_fn
-
-    def _use_native(self, n: int, n_p: int) -> bool:
-        backend = backend_choice()
-        if backend in ("casadi", "numpy") or (backend == "auto" and n < COMPILE_MIN_POSES):
-            return False
-        if not self._native_tried:
-            with _BUILDING:  # set "tried" only once the kernel (or None) is in place
-                if not self._native_tried:
-                    self._native = _native.kernel(
-                        (self.chain.structure, self.kind, self.columns),
-                        lambda: self.function,
-                        n_q=self.chain.structure.n_inputs,
-                        n_p=n_p,
-                        n_out=int(np.prod(self.shape)),
-                        joint_trig=self.chain.joint_trig,
-                    )
-                    self._native_tried = True
-        if self._native is None and backend == "c":
-            raise RuntimeError("CASECAL_BACKEND=c but no C compiler could build the kernel")
-        return self._native is not None
-
-
-BACKENDS = ("auto", "c", "numpy", "casadi")
-
-
-def backend_choice() -> str:
-    """``$CASECAL_BACKEND``: auto (C when a compiler is present, else numpy), c, numpy
-    (the instruction list vectorised, `casecal.model._vectorised`) or casadi (its own)."""
-    backend = os.environ.get("CASECAL_BACKEND", "auto").strip().lower() or "auto"
-    if backend not in BACKENDS:
-        raise CalibrationError(f"CASECAL_BACKEND={backend!r}; use one of {', '.join(BACKENDS)}")
-    return backend
 
 
 @cache
