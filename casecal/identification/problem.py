@@ -314,33 +314,33 @@ class Problem:
     def _normal(self, p: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(JᵀJ, Jᵀr)`` of every kernel column, (k, k) and (k,)."""
 
-        def gram(batches):
-            k = len(self.kernel_columns)
-            G, g = np.zeros((k, k)), np.zeros(k)
-            for J, _, _, rows in batches:
-                G += J.T @ J
-                g += J.T @ r[rows]
-            return G, g
+        def residual(J, f, poses, rows):
+            return r[rows]
 
-        return _summed(self._runs(p, gram))
+        return _summed(self._runs(p, lambda batches: self._gram(batches, residual)))
+
+    def _gram(self, batches, residual) -> tuple[np.ndarray, np.ndarray]:
+        """``(JᵀJ, Jᵀr)`` of one run's `batches`; ``residual(J, f, poses, rows)`` gives
+        each batch's weighted residuals."""
+        k = len(self.kernel_columns)
+        G, g = np.zeros((k, k)), np.zeros(k)
+        for batch in batches:
+            J = batch[0]
+            G += J.T @ J
+            g += J.T @ residual(*batch)
+        return G, g
 
     def _points_and_normal(self, x: np.ndarray) -> None:
         """Memoise the points at `x` and the normal equations there, from one pass."""
         p = self.p(x)
         f = np.empty_like(self.y)  # (N, 3m); each run writes its own poses
 
-        def gram(batches):
-            k = len(self.kernel_columns)
-            G, g = np.zeros((k, k)), np.zeros(k)
-            for J, f_batch, poses, _ in batches:
-                f[poses] = f_batch
-                # as `residual` forms it, bit for bit
-                r = ((self.y[poses] - f_batch) * self.w_rows[poses]).ravel()
-                G += J.T @ J
-                g += J.T @ r
-            return G, g
+        def residual(J, f_batch, poses, rows):
+            f[poses] = f_batch
+            # as `residual` forms it, bit for bit
+            return ((self.y[poses] - f_batch) * self.w_rows[poses]).ravel()
 
-        G, g = _summed(self._runs(p, gram))
+        G, g = _summed(self._runs(p, lambda batches: self._gram(batches, residual)))
         self._memoised(self._evaluation_key("points", p), lambda: f)
         self._memoised(self._normal_key(p), lambda: (G, g))
 
