@@ -84,7 +84,9 @@ def test_a_joint_that_never_moves_is_a_failure(sigma):
 
 @pytest.mark.parametrize("robot_name", ["puma560", "ur5e"])
 def test_the_lockstep_schedule_with_every_parameter_is_a_failure(robot_name):
-    """Noise-free data on the paper's schedule fit to 1e-8 mm, and the robot is mm wrong."""
+    """Noise-free data on the paper's schedule: the fit matches them (to 1e-8 mm on the
+    PUMA) or holds what these poses cannot support (the UR5e's frames alone fit them to
+    3 µm), and either way the robot is mm wrong across the workspace: a failure."""
     robot = cc.load_robot(robot_name)
     rng = np.random.default_rng(0)
     truth = {
@@ -94,7 +96,7 @@ def test_the_lockstep_schedule_with_every_parameter_is_a_failure(robot_name):
     }
     true = robot.with_deviations(truth)
     cal = cc.identify(robot, cc.simulate(true, cc.poses.seed_schedule(robot, 25)), "all")
-    assert cal.rms < 1e-7  # m: the data are matched
+    assert cal.rms < 1e-7 or cal.pruned  # m: the data are matched, or parameters held
     assert held_out_rms(cal, true) > 1e-4
     assert not cal.success
     assert any(c.name == "prediction no worse than uncalibrated" for c in cal.audit.failures)

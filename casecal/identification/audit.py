@@ -194,6 +194,14 @@ class Facts:
     """Estimated parameters on one of their bounds (None when no bounds were given)."""
     bound_gain: float = 0.0
     """Cost decrease freeing those from their bounds would add to the free ones'."""
+    rms_before: float | None = None
+    """RMS error (m) of the nominal robot with its frames fitted, the uncalibrated error
+    (`casecal.identification.reference`); None: `rms_start`."""
+
+    @property
+    def uncalibrated(self) -> float:
+        """The uncalibrated RMS error, m."""
+        return self.rms_start if self.rms_before is None else self.rms_before
 
 
 def audit(f: Facts) -> Audit:
@@ -262,6 +270,12 @@ def _converged(f: Facts) -> Check:
 def _no_growth(f: Facts) -> Check:
     ok = f.cost_final <= f.cost_start * (1 + 1e-9) + f.floor
     text = f"RMS {f.rms_start * 1e3:.4g} mm at the start, {f.rms_final * 1e3:.4g} mm after"
+    if ok and f.rms_final > 1.01 * f.rms_start + 1e-9:
+        # the cost weighs measured orientations too: it can fall while positions get worse
+        text += (
+            f"; the positions' RMS grew, while the cost, which weighs the measured "
+            f"orientations too, fell from {f.cost_start:.4g} to {f.cost_final:.4g}"
+        )
     if not ok:
         text += (
             ": the fit made the residuals larger (a one-shot linearisation far from the "
@@ -453,7 +467,7 @@ def _prediction(f: Facts) -> Check:
             name,
             False,
             f"these poses cannot determine {listed(f.unsupported)} (their uncertainty "
-            f"would exceed the uncalibrated error of {f.rms_start * 1e3:.3g} mm on poses "
+            f"would exceed the uncalibrated error of {f.uncalibrated * 1e3:.3g} mm on poses "
             "across the workspace); held at nominal, but what the other estimates absorbed "
             "of them holds only on poses like the measured ones (measure more, "
             "better-spread poses, or ask for fewer parameters)",
@@ -511,8 +525,9 @@ def predicted_rms(
 
     The error of each measured point is Gaussian with covariance ``J C Jᵀ``; its mean
     square is ``trace(J C Jᵀ)``. The correction is how far the measured points of
-    `robot` lie from those of `start`. None when the robot has no limits to draw poses
-    from.
+    `robot` lie from those of `start` (the nominal robot with its frames fitted, so that
+    frames nobody knew before measuring do not count as a correction). None when the
+    robot has no limits to draw poses from.
     """
     try:
         q = uniform(robot, PREDICTION_POSES, seed=seed)

@@ -48,7 +48,7 @@ class Gathered:
     outliers: tuple[int, ...]
 
 
-def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gathered:
+def gather(make, robot, start, reference, names, out: Outcome, settings, e0: float) -> Gathered:
     """Measure the `Facts` of a fit (module doc).
 
     Parameters
@@ -57,6 +57,9 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
         The measurements, fit frame.
     robot, start : Robot
         The nominal robot (for the parameters not asked for) and where the fit started.
+    reference : Robot
+        The nominal robot with the asked-for frames fitted
+        (`casecal.identification.reference`): the robot before calibration.
     names : list of str
         The asked-for parameters.
     out : Outcome
@@ -91,7 +94,7 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
     unasked = outside_gain(final.restricted([*out.estimated, *outside]), out.estimated)
     keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
     n_prior = int(np.sum(prior_w > 0))
-    workspace = predicted_rms(out.robot, start, out.estimated, cov)
+    workspace = predicted_rms(out.robot, reference, out.estimated, cov)
     facts = Facts(
         solver_status=out.solver_status,
         solver_message=out.message,
@@ -102,6 +105,7 @@ def gather(make, robot, start, names, out: Outcome, settings, e0: float) -> Gath
         known=settings.known,
         dof=(inliers[1] if inliers else linear.rows - len(out.estimated)) + n_prior,
         rms_start=e0,
+        rms_before=point_rms(make(reference, names=names).point_residuals(np.zeros(len(names)))),
         rms_final=point_rms(point_residuals),
         settled=out.settled,
         rounds=out.rounds,

@@ -38,6 +38,7 @@ from .audit import audit
 from .calibration import STATUS_MESSAGES, Calibration
 from .facts import gather, point_rms
 from .problem import Problem
+from .reference import frames_fitted
 from .rounds import LOSSES, Settings, fit_in_rounds
 from .solvers import SOLVERS
 from .start import choose_frame, partial_base_start
@@ -191,9 +192,11 @@ def identify(
     settings = Settings(
         method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior, progress
     )
-    out = fit_in_rounds(make, start, names, settings, e0)
+    reference = frames_fitted(make, start, names, settings, e0)
+    before = make(reference, names=names).point_residuals(np.zeros(len(names)))
+    out = fit_in_rounds(make, start, names, settings, point_rms(before))
 
-    got = gather(make, robot, start, names, out, settings, e0)
+    got = gather(make, robot, start, reference, names, out, settings, e0)
     est, x0 = got.estimated, np.zeros(len(out.estimated))
     point_residuals = est.point_residuals(x0)
     checks = audit(got.facts)
@@ -214,7 +217,7 @@ def identify(
         standard_errors=se,
         covariance=cov,
         residuals=frame.vectors_out(point_residuals).reshape(-1, 3),
-        residuals_before=_before(make, robot, names, frame, y, q),
+        residuals_before=frame.vectors_out(before).reshape(-1, 3),
         orientation_residuals=frame.vectors_out(est.orientation_residuals(x0)),
         outliers=got.outliers,
         loss=loss
@@ -247,14 +250,6 @@ def identify(
         still_joints=got.facts.still,
     )
     return cal.compare_to(truth) if truth is not None else cal
-
-
-def _before(make, robot, names, frame, y, q) -> np.ndarray:
-    """Measured minus nominal points, (N·m, 3), m: from the fit's memo where the fit frame
-    is the instrument's (the nominal robot is often where the fit started)."""
-    if frame.is_identity:
-        return make(robot, names=names).point_residuals(np.zeros(len(names))).reshape(-1, 3)
-    return (y - robot.measured_points(q)).reshape(-1, 3)
 
 
 SHARED_PROBLEMS = 3

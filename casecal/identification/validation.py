@@ -34,14 +34,26 @@ class ErrorStats:
 class Validation:
     """Errors of the nominal and of the calibrated model on held-out measurements.
 
-    Both models get their frames (base, tool position, reflectors) refitted to these
-    measurements first, since the instrument may have moved; the DH parameters are not
-    touched, so what remains is what the calibration did or did not fix.
+    Both models get their frames (base, tool position, reflectors; the tool's orientation
+    too where orientations were measured) refitted to these measurements first, since the
+    instrument and the probe may have moved; the DH parameters are not touched, so what
+    remains is what the calibration did or did not fix.
+
+    Attributes
+    ----------
+    before, after : ErrorStats
+        Position errors, m.
+    n_poses : int
+    rotation_before, rotation_after : ErrorStats or None
+        Where orientations were measured: the angle of each pose's orientation error
+        (``|log(R_meas R_modelᵀ)|``), rad.
     """
 
     before: ErrorStats
     after: ErrorStats
     n_poses: int
+    rotation_before: ErrorStats | None = None
+    rotation_after: ErrorStats | None = None
 
     def __str__(self) -> str:
         rows = [
@@ -51,16 +63,37 @@ class Validation:
         ]
         for label, s in (("before", self.before), ("after", self.after)):
             rows.append(f"{label:8}{s.rms * 1e3:10.4f}{s.mean * 1e3:10.4f}{s.max * 1e3:10.4f}")
+        if self.rotation_before is not None and self.rotation_after is not None:
+            rows.append(f"{'':8}{'RMS':>10}{'mean':>10}{'max':>10}   (deg, orientation)")
+            for label, s in (("before", self.rotation_before), ("after", self.rotation_after)):
+                d = np.degrees([s.rms, s.mean, s.max])
+                rows.append(f"{label:8}{d[0]:10.4f}{d[1]:10.4f}{d[2]:10.4f}")
         return "\n".join(rows)
 
 
-def refit_frames(robot: Robot, measurements: Measurements) -> ErrorStats:
-    """Errors of `robot` on `measurements` after fitting its frames alone to them."""
-    frames = [
-        n
-        for n in robot.parameter_names
-        if n.startswith(("base_", "point")) or n in ("tool_x", "tool_y", "tool_z")
-    ]
+def _rotation_stats(vectors: np.ndarray) -> ErrorStats:
+    angle = np.linalg.norm(vectors, axis=1)
+    return ErrorStats(
+        float(np.sqrt(np.mean(angle**2))), float(angle.mean()), float(angle.max()), angle.size
+    )
+
+
+def refit_frames(robot: Robot, measurements: Measurements) -> tuple[ErrorStats, ErrorStats | None]:
+    """Errors of `robot` on `measurements` after fitting its frames alone to them.
+
+    Returns
+    -------
+    positions : ErrorStats
+        m.
+    orientations : ErrorStats or None
+        rad; None when no orientations were measured.
+    """
+    # a re-mounted probe turns as well as moves: where orientations are measured, the
+    # tool's orientation is a frame to refit (fixed, it trades positions for angles)
+    tool = ("tool_x", "tool_y", "tool_z")
+    if measurements.orientations is not None:
+        tool += ("tool_rx", "tool_ry", "tool_rz")
+    frames = [n for n in robot.parameter_names if n.startswith(("base_", "point")) or n in tool]
     try:
         cal = identify(robot, measurements, frames, "gauss-newton")
     except CalibrationError as exc:
@@ -74,7 +107,8 @@ def refit_frames(robot: Robot, measurements: Measurements) -> ErrorStats:
         raise CalibrationError(
             f"the frames did not fit the held-out data: {failed[0].name}: {failed[0].text}"
         )
-    return ErrorStats.of(cal.residuals)
+    rotations = cal.orientation_residuals
+    return ErrorStats.of(cal.residuals), None if rotations is None else _rotation_stats(rotations)
 
 
 def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> Validation:
@@ -90,11 +124,9 @@ def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> V
     """
     if nominal.points == () and calibrated.points:
         nominal = nominal.with_points(calibrated.points)
-    return Validation(
-        before=refit_frames(nominal, measurements),
-        after=refit_frames(calibrated, measurements),
-        n_poses=measurements.n_poses,
-    )
+    before, rotation_before = refit_frames(nominal, measurements)
+    after, rotation_after = refit_frames(calibrated, measurements)
+    return Validation(before, after, measurements.n_poses, rotation_before, rotation_after)
 
 
 def split(measurements: Measurements, fraction: float, seed=0):
