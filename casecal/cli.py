@@ -131,11 +131,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     if args.holdout:
         meas, held = split(meas, args.holdout, seed=args.seed)
     rot = parse_angle(args.orientation_sigma) if args.orientation_sigma else None
-    cal = identify(
-        robot,
-        meas,
-        args.parameters,
-        args.method,
+    options = dict(
         noise=noise,
         truth=truth,
         max_iterations=args.max_iterations,
@@ -144,6 +140,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         orientation_sigma=rot,
         progress=_progress_line(meas.n_poses),
     )
+    cal = identify(robot, meas, args.parameters, args.method, **options)
     if meas.n_poses >= PROGRESS_POSES and sys.stderr.isatty():
         print(file=sys.stderr)  # end the progress line
     print(cal.summary())
@@ -154,6 +151,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         )
     if not cal.success:
         raise CalibrationError(f"the fit did not pass ({cal.message}); nothing written")
+    cal = _without_poorly_determined(cal, meas, options)
     # what was asked to be written is written as soon as the fit is good
     _write_outputs(args, cal)
     if held is not None:
@@ -163,6 +161,35 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         except CalibrationError as exc:
             written = " (the calibrated files above were written)" if args.output else ""
             raise CalibrationError(f"hold-out validation failed{written}: {exc}") from None
+
+
+def _without_poorly_determined(cal, meas, options):
+    """The calibration to write: poorly determined estimates held at nominal, the rest
+    refitted (`casecal.identification.usable`); a refit that fails writes nothing."""
+    from .identification.calibration import display_unit
+    from .identification.usable import hold_poorly_determined
+
+    if not cal.poorly_determined:
+        return cal
+    shown = []
+    for name in cal.poorly_determined:
+        unit, factor = display_unit(name)
+        shown.append(f"{name} ± {cal.standard_errors[name] * factor:.3g} {unit}")
+    print(
+        f"\n{', '.join(shown)}: poorly determined, so not written: held at nominal and the "
+        "other parameters refitted without them"
+    )
+    refit = hold_poorly_determined(cal, meas, **options)
+    if not refit.success:
+        raise CalibrationError(
+            f"with {', '.join(cal.poorly_determined)} held at nominal the fit does not pass "
+            f"({refit.message}); nothing written: measure more, better-spread poses, or "
+            "leave these parameters out of --parameters"
+        )
+    print(
+        f"refit: {refit.message}; RMS {refit.rms * 1e3:.4g} mm (with them: {cal.rms * 1e3:.4g} mm)"
+    )
+    return refit
 
 
 PROGRESS_POSES = 10_000
