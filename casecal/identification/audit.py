@@ -194,6 +194,9 @@ class Facts:
     """Estimated parameters on one of their bounds (None when no bounds were given)."""
     bound_gain: float = 0.0
     """Cost decrease freeing those from their bounds would add to the free ones'."""
+    lack_of_fit: tuple[float, int, float, int] | None = None
+    """Without σ: (gain, directions, cost, dof) of a smooth basis of the joint values
+    beside the estimates (`casecal.identification.lack_of_fit`)."""
     rms_before: float | None = None
     """RMS error (m) of the nominal robot with its frames fitted, the uncalibrated error
     (`casecal.identification.reference`); None: `rms_start`."""
@@ -326,6 +329,20 @@ def _noise(f: Facts) -> Check:
                 f", more than any position instrument's noise ({PLAUSIBLE_NOISE * 1e3:g} mm): "
                 "the model does not fit; if your instrument really is that noisy, state its "
                 "σ (--noise, or a sigma_mm column) and the fit is judged against it"
+            )
+    if f.lack_of_fit is not None and not at_floor:
+        matter, statistic, bound = held_matter(*f.lack_of_fit, known=False)
+        text += (
+            f"; smooth functions of the joint values explain {statistic:.3g}× more per "
+            f"direction than what remains (chance: up to {bound:.3g})"
+        )
+        if matter:
+            ok = False
+            text += (
+                ": the residuals follow the joint values, a model error (a term the model "
+                "lacks: gravity compliance, joint-angle harmonics, a parameter not asked "
+                "for), not noise; its held-out error will exceed the prediction (add the "
+                "term, e.g. with_compliance, or state the instrument's σ)"
             )
     if f.smoothness is not None and not at_floor:
         smooth = f.smoothness < SMOOTH

@@ -9,12 +9,14 @@ parameters could still gain.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from .audit import Facts, predicted_rms, smoothness
 from .evidence import blind_only_here, outside_gain, still_joints
+from .lack_of_fit import lack_of_fit
 from .linalg import Reduction
 from .outliers import outlier_poses
 from .problem import Problem
@@ -95,6 +97,7 @@ def gather(make, robot, start, reference, names, out: Outcome, settings, e0: flo
     keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
     n_prior = int(np.sum(prior_w > 0))
     workspace = predicted_rms(out.robot, reference, out.estimated, cov)
+    smooth = None if settings.known or robust else lack_of_fit(est, robot.joint_types)
     facts = Facts(
         solver_status=out.solver_status,
         solver_message=out.message,
@@ -143,6 +146,7 @@ def gather(make, robot, start, reference, names, out: Outcome, settings, e0: flo
         n_prior=n_prior,
         bounds=None if not settings.bounds else tuple(active),
         bound_gain=fit.solve()[1] - decrease if active else 0.0,
+        lack_of_fit=None if smooth is None else dataclasses.astuple(smooth),
     )
     return Gathered(facts, cov, est, final, outliers)
 

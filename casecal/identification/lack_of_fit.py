@@ -1,0 +1,130 @@
+"""A lack-of-fit test that needs no σ and no near neighbours.
+
+Without a stated σ the residuals are taken for noise when they are small enough for an
+instrument (`casecal.identification.audit.PLAUSIBLE_NOISE`) and do not change smoothly
+from one pose to its nearest neighbour (`casecal.identification.audit.smoothness`). Poses
+far apart in joint space have no near neighbour, and a rigid model of an arm that bends
+0.02–0.11° under gravity passed with 0.1–0.5 mm residuals while its held-out error was
+3–4× what its covariance predicted.
+
+Noise is independent of the joint values; a model error is a smooth function of them. So
+the residuals are regressed on generic smooth joint errors (on each joint, sine and
+cosine of its angle and of its sums with its neighbours', `joint_functions`, mapped to
+the measured points by the joint Jacobian), beside the estimated parameters' columns,
+and the decrease of the residual sum of squares is judged by an F test
+(`casecal.identification.rank.held_matter`): noise lowers it by no more than chance
+allows, a missing term (compliance, joint-angle harmonics, a parameter not asked for) by
+far more.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .problem import Problem
+
+MOST_POSES = 2000
+"""Poses the test looks at (a fixed random subset beyond): enough for a few dozen columns."""
+
+
+@dataclass(frozen=True)
+class LackOfFit:
+    """What the smooth basis explains beyond the estimated parameters.
+
+    Attributes
+    ----------
+    gain : float
+        Decrease of ``0.5 Σ r²`` (the cost's units) the basis adds to the estimates'.
+    n_extra : int
+        Independent directions the basis adds: the degrees of freedom of the gain.
+    cost, dof : float, int
+        ``0.5 Σ r²`` and residual degrees of freedom of the looked-at poses.
+    """
+
+    gain: float
+    n_extra: int
+    cost: float
+    dof: int
+
+
+def joint_functions(q: np.ndarray, joint_types: str) -> list[tuple[int, np.ndarray]]:
+    """Smooth joint errors to look for, as (joint, values (N,)) pairs: on each joint, the
+    sine and cosine of its angle and of its sums with its neighbours' (the gravity
+    torque about a pitch joint follows the sum of the pitch angles before it); a
+    prismatic joint's value and square, scaled to the range it spans."""
+    out = []
+    n = len(joint_types)
+    for j, kind in enumerate(joint_types):
+        if kind == "P":
+            z = q[:, j] - q[:, j].mean()
+            z = z / (np.ptp(z) or 1.0)
+            out += [(j, z), (j, z**2)]
+            continue
+        angles = [q[:, j]]
+        neighbours = [k for k in (j - 1, j + 1) if 0 <= k < n and joint_types[k] == "R"]
+        angles += [q[:, j] + q[:, k] for k in neighbours]
+        out += [(j, f(a)) for a in angles for f in (np.sin, np.cos)]
+    return out
+
+
+def lack_of_fit(problem: Problem, joint_types: str, seed: int = 0) -> LackOfFit | None:
+    """`LackOfFit` of `problem` (the estimated parameters at the fitted robot).
+
+    Returns None when too few rows are left to judge by (fewer than twice the basis's
+    columns past the parameters').
+    """
+    n = problem.q.shape[0]
+    if n > MOST_POSES:
+        keep = np.sort(np.random.default_rng(seed).choice(n, MOST_POSES, replace=False))
+        problem = Problem(
+            problem.robot,
+            problem.q[keep],
+            problem.y[keep],
+            problem.w[keep],
+            problem.names,
+            orientations=None if problem.R is None else problem.R[keep],
+            w_rot=problem.w_rot,
+        )
+    x0 = np.zeros(len(problem.names))
+    J = problem.jacobian(x0)
+    r = problem.residual(x0)
+    X = _columns(problem, joint_types)
+    inside, rank_in = _explained(J, r)
+    both, rank_both = _explained(np.hstack([J, X]), r)
+    n_extra = rank_both - rank_in
+    dof = r.size - rank_both
+    if n_extra <= 0 or dof < 2 * n_extra:
+        return None
+    cost = 0.5 * float(r @ r) - 0.5 * inside  # what the estimates' own step leaves
+    return LackOfFit(max(0.5 * (both - inside), 0.0), n_extra, cost, r.size - rank_in)
+
+
+def _explained(A: np.ndarray, r: np.ndarray) -> tuple[float, int]:
+    """|P_A r|² and the rank of A (columns scaled to unit norm first)."""
+    norms = np.linalg.norm(A, axis=0)
+    A = A[:, norms > 0] / norms[norms > 0]
+    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    rank = int(np.sum(s > s[0] * 1e-9)) if s.size else 0
+    c = U[:, :rank].T @ r
+    return float(c @ c), rank
+
+
+def _columns(problem: Problem, joint_types: str, h: float = 1e-6) -> np.ndarray:
+    """The weighted effect on the measured points of each joint error of
+    `joint_functions`, shape (N · rows per pose, B); orientation rows left at 0."""
+    q, robot = problem.q, problem.robot
+    n, rows, dof = len(q), problem.w_rows.shape[1], len(joint_types)
+    moved = np.empty((n, 3 * problem.m, dof))
+    for j in range(dof):  # ∂(measured points)/∂q_j by central differences
+        step = np.zeros(q.shape[1])
+        step[j] = h
+        plus = robot.measured_points(q + step).reshape(n, -1)
+        minus = robot.measured_points(q - step).reshape(n, -1)
+        moved[:, :, j] = (plus - minus) / (2 * h)
+    functions = joint_functions(q[:, :dof], joint_types)
+    X = np.zeros((n, rows, len(functions)))
+    for c, (j, values) in enumerate(functions):
+        X[:, : 3 * problem.m, c] = moved[:, :, j] * values[:, None]
+    return (X * problem.w_rows[:, :, None]).reshape(n * rows, -1)
