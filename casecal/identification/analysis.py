@@ -441,7 +441,7 @@ REPRESENTED = 0.05
 named in their combinations; beyond it the held parameter is its own, unestimated effect."""
 
 
-def represent(J: np.ndarray, names, estimated, exclude=()) -> Representation:
+def represent(J: np.ndarray, names, estimated, exclude=(), standard_errors=None) -> Representation:
     """Express each held parameter's column by the estimated ones (least squares).
 
     Parameters
@@ -453,7 +453,12 @@ def represent(J: np.ndarray, names, estimated, exclude=()) -> Representation:
         A subset of `names`.
     exclude : sequence of str
         Held parameters to leave out of the combinations (held for the noise: their effect
-        is below it, and naming them in every estimate would say nothing useful).
+        on the measured points is below it), unless `standard_errors` is given.
+    standard_errors : dict of str to float, optional
+        Of the estimates, SI. Then an `exclude`d parameter is named in an estimate's
+        combination where a plausible deviation of it (`UNITS`: 2.5 mm, 0.5°) moves that
+        estimate by more than its standard error: d3 held for the noise beside d2 makes
+        the d2 estimate d2 + d3, and stating it as d2 alone was off by 100 standard errors.
     """
     names = list(names)
     if J.shape[0] > J.shape[1]:
@@ -463,8 +468,11 @@ def represent(J: np.ndarray, names, estimated, exclude=()) -> Representation:
     norms = np.linalg.norm(J, axis=0)
     terms: dict[str, list] = {names[i]: [] for i in est}
     misfit: dict[str, float] = {}
+    if standard_errors is not None and est:
+        noisy = [i for i in range(len(names)) if i not in set(est) and names[i] in exclude]
+        _alias(J, names, est, noisy, standard_errors, terms)
     if not held:
-        return Representation({k: () for k in terms}, misfit)
+        return Representation({k: tuple(v) for k, v in terms.items()}, misfit)
     B = J[:, est]
     b_norms = np.where(norms[est] > 0, norms[est], 1.0)
     for h in held:
@@ -486,6 +494,23 @@ def represent(J: np.ndarray, names, estimated, exclude=()) -> Representation:
             ):
                 terms[names[k]].append((names[h], float(c)))
     return Representation({k: tuple(v) for k, v in terms.items()}, misfit)
+
+
+def _alias(J, names, est, noisy, standard_errors, terms) -> None:
+    """Add to `terms` the parameters held for the noise that a plausible deviation of
+    would move an estimate by more than its standard error (the least-squares alias
+    ``(J_eᵀ J_e)⁻¹ J_eᵀ J_h``, exact for the linearised fit whatever J_e leaves of J_h)."""
+    norms = np.linalg.norm(J, axis=0)
+    b_norms = np.where(norms[est] > 0, norms[est], 1.0)
+    B = J[:, est] / b_norms
+    for h in noisy:
+        if norms[h] == 0:
+            continue
+        coef = np.linalg.lstsq(B, J[:, h], rcond=None)[0] / b_norms
+        size = UNITS[unit(names[h])].plausible
+        for k, c in zip(est, coef, strict=True):
+            if abs(c) * size > standard_errors.get(names[k], np.inf):
+                terms[names[k]].append((names[h], float(c)))
 
 
 def selection(robot: Robot, parameters) -> list[str]:

@@ -240,6 +240,7 @@ def identify(
             partial(make, y=y, orientations=measurements.orientations),
             names,
             out,
+            se,
         ),
         pruned=out.pruned,
         frozen=out.frozen,
@@ -285,13 +286,14 @@ def _shared(make):
     return shared
 
 
-def _representation(calibrated, final, frame, make_world, names, out):
+def _representation(calibrated, final, frame, make_world, names, out, se):
     """What each estimate stands for, with the base frame in the instrument's frame."""
     if not frame.is_identity:
         final = make_world(calibrated, names=names)
     if out.end_analysis is out.start_analysis:  # one-shot: what it saw where it linearised
         final = make_world(frame.robot_out(out.start_robot), names=names)
-    return represent(final.reduced(np.zeros(len(names))).R, names, out.estimated, out.pruned)
+    R = final.reduced(np.zeros(len(names))).R
+    return represent(R, names, out.estimated, out.pruned, standard_errors=se)
 
 
 def verdict(checks, solver_status: int, solver_message: str | None) -> tuple[int, str]:
