@@ -56,7 +56,10 @@ class Difference:
         return self.position <= EXACT and self.angle <= EXACT
 
     def __str__(self) -> str:
-        return f"{_mm(self.position)} mm and {_deg(self.angle)}°"
+        # what is within EXACT is rounding: "0.000", not "4.2e-14"
+        position = self.position if self.position > EXACT else 0.0
+        angle = self.angle if self.angle > EXACT else 0.0
+        return f"{_mm(position)} mm and {_deg(angle)}°"
 
 
 class ExportLossWarning(CalibrationWarning):

@@ -29,7 +29,11 @@ def export(robot, path) -> Export:
         from .catalog import robot_from_dict, robot_to_toml
 
         def read(text):
-            return robot_from_dict(tomllib.loads(text), str(path), Path(path).stem)
+            try:
+                data = tomllib.loads(text)
+            except tomllib.TOMLDecodeError as exc:
+                raise CalibrationError(f"not valid TOML ({exc})") from None
+            return robot_from_dict(data, str(path), Path(path).stem)
 
         text, notes = robot_to_toml(robot), []
         contract = Contract("a TOML robot file", robot, robot, read)
