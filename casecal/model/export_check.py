@@ -197,22 +197,17 @@ def verified(path, text: str, notes, contract: Contract) -> Export:
     loss = difference(reference, back, q)
     notes = list(notes)
     statement = ""
-    terms_loss = Difference(0.0, 0.0)
-    if contract.terms_reason:
-        geometry = dataclasses.replace(reference, terms=(), auto_beta=False)
-        terms_loss = difference(reference, geometry, q)
-        tool_loss = difference(geometry, contract.held, q)
-    else:
-        tool_loss = difference(reference, contract.held, q)
     if not loss.exact:
-        reasons = [
-            reason
-            for part, reason in (
-                (tool_loss, contract.tool_reason),
-                (terms_loss, contract.terms_reason),
-            )
-            if reason and not _negligible(part)
-        ]
+        # which part is lost: the error terms (reference against its geometry) and the
+        # tool side (the geometry against what the format holds)
+        geometry = reference
+        parts = []
+        if contract.terms_reason:
+            geometry = dataclasses.replace(reference, terms=(), auto_beta=False)
+            parts.append((difference(reference, geometry, q), contract.terms_reason))
+        if contract.tool_reason:
+            parts.insert(0, (difference(geometry, contract.held, q), contract.tool_reason))
+        reasons = [reason for part, reason in parts if not _negligible(part)]
         where = "at the tool and the measured points" if reference.points else "at the tool"
         statement = f"this file loses up to {loss} {where}: " + "; ".join(
             reasons or ["what it cannot hold"]

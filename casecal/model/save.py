@@ -70,7 +70,7 @@ def robot_text(robot, path) -> tuple[str, list[str]]:
     return out.text, list(out.notes)
 
 
-def save_robot(robot, path, strict: bool = False) -> list[str]:
+def save_robot(robot, path, *, strict: bool = False) -> list[str]:
     """Write `robot` to `path` (atomically) as TOML (``.toml``), URDF (``.urdf``) or a UR
     kinematics file (``.yaml``, `casecal.model.ur_kinematics`), verified on write.
 

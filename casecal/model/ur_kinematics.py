@@ -10,6 +10,10 @@ Writing: a URDF robot from a UR URDF (its joint origins in the file's frames) or
 standard-DH robot of six revolute joints (``origin_i = Tx(a_{i-1}) Rx(alpha_{i-1}) Ry(beta)
 · Tz(d_i) Rz(theta_i)``, the DH frames being UR's link frames). Reading: a URDF-convention
 robot of those six joints, which reproduces the chain the file describes.
+
+What comes after ``wrist_3_link`` (a DH a6, alpha6, beta6, a calibrated tool) has no place
+in the file: `ur_kinematics_contract` says so, and `casecal.save_robot` states the loss in mm
+and degrees with the controller TCP that keeps it (`casecal.model.export_check`).
 """
 
 from __future__ import annotations
