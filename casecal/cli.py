@@ -248,17 +248,16 @@ def _check_robot_format(args: argparse.Namespace, robot) -> None:
 def _robot_text(args: argparse.Namespace, robot) -> str:
     """The -o file's text in the format its extension names (.toml, .urdf); what that
     format cannot hold is said on standard error."""
-    from .model.save import robot_text
+    from .model.save import export
 
     origin = args.robot
     if Path(origin).is_file():  # a path relative to the output's folder, as loading reads it
         origin = os.path.relpath(Path(origin).resolve(), Path(args.output).resolve().parent)
-    text, notes = robot_text(
-        dataclasses.replace(robot, calibrated_from=origin, auto_beta=False), args.output
-    )
-    for note in notes:
-        print(f"note: {args.output}: {note}", file=sys.stderr)
-    return text
+    out = export(dataclasses.replace(robot, calibrated_from=origin, auto_beta=False), args.output)
+    for note in out.notes:  # the file read back and checked: what it loses is a warning
+        kind = "casecal: warning" if note == out.statement else "note"
+        print(f"{kind}: {args.output}: {note}", file=sys.stderr)
+    return out.text
 
 
 def _write_outputs(args: argparse.Namespace, cal) -> None:

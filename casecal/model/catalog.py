@@ -317,15 +317,15 @@ def robot_to_toml(robot: Robot) -> str:
             "",
             "[[joints]]",
             f"type = {_q(j.type)}",
-            f"a = {j.a!r}",
-            f"alpha = {j.alpha!r}",
-            f"d = {j.d!r}",
-            f"theta = {j.theta!r}",
+            f"a = {float(j.a)!r}",
+            f"alpha = {float(j.alpha)!r}",
+            f"d = {float(j.d)!r}",
+            f"theta = {float(j.theta)!r}",
         ]
         if j.beta is not None:
-            lines.append(f"beta = {j.beta!r}")
+            lines.append(f"beta = {float(j.beta)!r}")
         if j.limits is not None:
-            lines.append(f"limits = [{j.limits[0]!r}, {j.limits[1]!r}]")
+            lines.append(f"limits = [{float(j.limits[0])!r}, {float(j.limits[1])!r}]")
         lines += inertial_lines(robot, i)
     if robot.points:
         rows = ", ".join("[" + ", ".join(repr(float(v)) for v in p) + "]" for p in robot.points)

@@ -10,6 +10,10 @@ Writing: a URDF robot from a UR URDF (its joint origins in the file's frames) or
 standard-DH robot of six revolute joints (``origin_i = Tx(a_{i-1}) Rx(alpha_{i-1}) Ry(beta)
 · Tz(d_i) Rz(theta_i)``, the DH frames being UR's link frames). Reading: a URDF-convention
 robot of those six joints, which reproduces the chain the file describes.
+
+What comes after ``wrist_3_link`` (a DH a6, alpha6, beta6, a calibrated tool) has no place
+in the file: `ur_kinematics_contract` says so, and `casecal.save_robot` states the loss in mm
+and degrees with the controller TCP that keeps it (`casecal.model.export_check`).
 """
 
 from __future__ import annotations
@@ -56,10 +60,9 @@ def _dh_origins(robot) -> tuple[list[np.ndarray], list[str]]:
             @ transform((0, 0, 0), (j.alpha, 0, 0))
             @ transform((0, 0, 0), (0, j.beta or 0.0, 0))
         )
-    notes = []
-    if not _is_identity(post @ transform(robot.tool.xyz, robot.tool.rpy)):
-        notes.append("the tool frame (beyond a6, alpha6) is not written: tool0 is wrist_3_link")
-    return origins, notes
+    # what comes after wrist_3 (a6, alpha6, beta6, the tool) is not written: the check on
+    # write measures and states it (`ur_kinematics_contract`)
+    return origins, []
 
 
 def _urdf_origins(robot) -> tuple[list[np.ndarray], list[str]]:
@@ -72,28 +75,16 @@ def _urdf_origins(robot) -> tuple[list[np.ndarray], list[str]]:
             f"robot {robot.name!r}: a UR kinematics file needs the joints {', '.join(JOINTS)}"
             f" (with one common prefix); this robot has {', '.join(names)}"
         )
-    notes = []
     if robot.urdf is not None:
-        found, fixed_after = file_origins(robot)
+        found, _ = file_origins(robot)
         origins = [found[n] for n in names]
-        # the file's own tool (its fixed joints after wrist_3): a calibrated tool that
-        # differs from it has no place in a kinematics file
-        nominal_tool = np.eye(4)
-        for j in fixed_after:
-            nominal_tool = nominal_tool @ j.T
-        if not np.allclose(transform(robot.tool.xyz, robot.tool.rpy), nominal_tool, atol=1e-12):
-            notes.append(
-                "the calibrated tool frame is not written: a UR kinematics file ends at "
-                "wrist_3_link (set the TCP on the controller, or save as .toml)"
-            )
     else:
         origins = [
             transform(j.xyz, j.rpy) @ _rotation_about(j.axis, j.offset) for j in robot.joints
         ]
-    notes += offset_note(robot, "a UR kinematics file")
-    if not _is_identity(transform(robot.tool.xyz, robot.tool.rpy)) and robot.urdf is None:
-        notes.append("the tool frame is not written: tool0 is wrist_3_link")
-    return origins, notes
+    # a calibrated tool is not written (the file ends at wrist_3_link): the check on write
+    # measures and states it (`ur_kinematics_contract`)
+    return origins, offset_note(robot, "a UR kinematics file")
 
 
 def ur_kinematics_text(robot) -> tuple[str, list[str]]:
@@ -110,11 +101,13 @@ def ur_kinematics_text(robot) -> tuple[str, list[str]]:
             "the base frame (instrument to the base) is not part of the robot and is not "
             "written; save the robot as .toml to keep it"
         )
+    if robot.points:
+        notes.append("the measured points (reflectors) are not written: the file has no place")
     lines = ["kinematics:"]
     for key, T in zip(KEYS, origins, strict=True):
         xyz, rpy = split(T)
         lines.append(f"  {key}:")
-        lines += [f"    {f}: {v!r}" for f, v in zip(FIELDS, (*xyz, *rpy), strict=True)]
+        lines += [f"    {f}: {float(v)!r}" for f, v in zip(FIELDS, (*xyz, *rpy), strict=True)]
     lines.append(f"  hash: casecal_{abs(hash(tuple(np.round(np.ravel(origins), 15)))):x}")
     return "\n".join(lines) + "\n", notes
 
@@ -186,3 +179,58 @@ def read_ur_kinematics(text: str, label: str = "kinematics file", name: str = "u
         full_name=f"{name} (UR kinematics file: base_link_inertia to tool0)",
         source=(label,),
     )
+
+
+def ur_kinematics_contract(robot, label: str):
+    """What a UR kinematics file holds of `robot` (`casecal.model.export_check.Contract`).
+
+    The chain from ``base_link_inertia`` to ``wrist_3_link`` (tool0), compared in the
+    robot's base frame: for a DH robot the table without a6, alpha6, beta6 and the tool;
+    for a URDF robot its joints, ending at ``wrist_3_link`` followed by the fixed joints its
+    own URDF has after ``wrist_3_joint`` (those are ur_description's, not the file's). What
+    is beyond is a TCP, which the reason gives for the controller.
+    """
+    import dataclasses
+    from pathlib import Path
+
+    from .export_check import Contract, tcp_text
+    from .robot import Frame
+
+    reference = dataclasses.replace(robot, base=Frame(), auto_beta=False)
+    geometry = dataclasses.replace(reference, terms=(), auto_beta=False)
+    end = Frame()
+    if robot.convention == "dh":
+        last = robot.joints[-1]
+        cut = dataclasses.replace(last, a=0.0, alpha=0.0, beta=None if last.beta is None else 0.0)
+        joints = (*robot.joints[:-1], cut)
+        wrist = dataclasses.replace(geometry, joints=joints, tool=Frame(), auto_beta=False)
+        parts = [f"a6 = {last.a * 1e3:.4g} mm"] if last.a else []
+        parts += [f"alpha6 = {math.degrees(last.alpha):.4g}°"] if last.alpha else []
+        parts += [f"beta6 = {math.degrees(last.beta):.4g}°"] if last.beta else []
+        if not _is_identity(transform(robot.tool.xyz, robot.tool.rpy)):
+            parts.append("the tool frame")
+        what = " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 1 else parts)
+        lost = f"{what or 'the tool side'} {'has' if len(parts) < 2 else 'have'} no place"
+    else:
+        if robot.urdf is not None:
+            from .urdf_out import file_origins
+
+            nominal = np.eye(4)
+            for j in file_origins(robot)[1]:
+                nominal = nominal @ j.T
+            end = Frame(*split(nominal))
+        wrist = dataclasses.replace(geometry, tool=Frame(), auto_beta=False)
+        lost = "the calibrated tool frame is not written: it has no place"
+    q0 = np.zeros((1, robot.dof))
+    tcp = np.linalg.inv(wrist.fk(q0)[0]) @ geometry.fk(q0)[0]
+    reason = (
+        f"{lost} in a UR kinematics file (tool0 is wrist_3_link); set the controller's TCP "
+        f"to {tcp_text(tcp)} to keep it, or save as .toml"
+    )
+
+    def read(text: str):
+        back = read_ur_kinematics(text, label, Path(label).stem)
+        return dataclasses.replace(back, tool=end, points=robot.points, auto_beta=False)
+
+    held = dataclasses.replace(wrist, tool=end, auto_beta=False)
+    return Contract("a UR kinematics file", reference, held, read, tool_reason=reason)

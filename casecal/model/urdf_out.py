@@ -18,6 +18,11 @@ from ..errors import CalibrationError
 from .urdf import PassiveJoint, chain_path, parse, split, transform
 
 
+def _attr(text: str) -> str:
+    """`text` for a double-quoted XML attribute."""
+    return xml_escape(str(text), {'"': "&quot;"})
+
+
 def _fmt(values) -> str:
     return " ".join(repr(float(v)) if v != 0 else "0" for v in values)
 
@@ -119,8 +124,8 @@ def calibrated_urdf(robot) -> tuple[str, list[str]]:
             before = before @ j.T
         xyz, rpy = split(np.linalg.inv(before) @ tool)
         text = _set_origin(text, fixed_after[-1].name, xyz, rpy)
-    elif not np.allclose(tool, np.eye(4), rtol=0, atol=1e-15):
-        notes.append("the tool frame is not written: the chain ends at a movable joint")
+    # else the tool frame has no joint to go into: the check on write measures and states
+    # it (`urdf_contract`)
     if not np.allclose(transform(robot.base.xyz, robot.base.rpy), np.eye(4), rtol=0, atol=1e-15):
         notes.append(
             "the base frame (instrument to the base link) is not part of the robot and is "
@@ -187,13 +192,13 @@ def new_urdf(robot) -> tuple[str, list[str]]:
     links = ["base_link", *(f"link{i}" for i in range(1, len(rows) + 1)), "tool0"]
     base = transform(robot.base.xyz, robot.base.rpy)
     world = not np.allclose(base, np.eye(4), rtol=0, atol=1e-15)
-    lines = ['<?xml version="1.0"?>', f'<robot name="{robot.name}">']
+    lines = ['<?xml version="1.0"?>', f'<robot name="{_attr(robot.name)}">']
     lines += [f'  <link name="{name}"/>' for name in (["world"] if world else []) + links]
 
     def joint(name, kind, parent, child, T, axis=None, limits=None, mimic=None):
         xyz, rpy = split(T)
         out = [
-            f'  <joint name="{name}" type="{kind}">',
+            f'  <joint name="{_attr(name)}" type="{kind}">',
             f'    <parent link="{parent}"/>',
             f'    <child link="{child}"/>',
             f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>',
@@ -202,23 +207,35 @@ def new_urdf(robot) -> tuple[str, list[str]]:
             out.append(f'    <axis xyz="{_fmt(axis)}"/>')
         if limits is not None:
             out.append(
-                f'    <limit lower="{limits[0]!r}" upper="{limits[1]!r}" effort="0" velocity="0"/>'
+                f'    <limit lower="{float(limits[0])!r}" upper="{float(limits[1])!r}" '
+                'effort="0" velocity="0"/>'
             )
         if mimic is not None:
             out.append(
-                f'    <mimic joint="{mimic[0]}" multiplier="{mimic[1]!r}" offset="{mimic[2]!r}"/>'
+                f'    <mimic joint="{_attr(mimic[0])}" multiplier="{float(mimic[1])!r}" '
+                f'offset="{float(mimic[2])!r}"/>'
             )
         return [*out, "  </joint>"]
 
     if world:
         lines += joint("world_to_base", "fixed", "world", "base_link", base)
     for i, (name, letter, T, axis, limits, mimic) in enumerate(rows):
+        if letter == "P" and limits is None:
+            raise CalibrationError(
+                f"robot {robot.name!r}: prismatic joint {name!r} has no limits, which a URDF "
+                "needs; give it limits (limits = [min, max] in its [[joints]] table)"
+            )
         kind = "prismatic" if letter == "P" else ("revolute" if limits else "continuous")
         lines += joint(name, kind, links[i], links[i + 1], T, axis, limits, mimic)
     tool = post @ transform(robot.tool.xyz, robot.tool.rpy)
     lines += joint("tool", "fixed", links[-2], "tool0", tool)
     lines.append("</robot>")
     notes = ["the measured points (reflectors) are not written"] if robot.points else []
+    if world:
+        notes.append(
+            "the base frame (instrument to the base) is written as the fixed joint "
+            "world_to_base from a link 'world'; load with base_link='base_link' to leave it out"
+        )
     return "\n".join(lines) + "\n", notes
 
 
@@ -227,3 +244,41 @@ def robot_to_urdf(robot) -> tuple[str, list[str]]:
     if robot.urdf is not None:
         return calibrated_urdf(robot)
     return new_urdf(robot)
+
+
+def urdf_contract(robot, label: str):
+    """What a URDF of `robot` holds (`casecal.model.export_check.Contract`), read back with
+    the same chain: for a robot from a URDF its base link to its tip link, compared in its
+    base frame (a URDF has no place for the instrument's); for a new URDF the root (the
+    ``world`` link that holds the base frame, when there is one) to ``tool0``. The tool
+    frame goes into the last fixed joint of the chain; a chain that ends at a movable
+    joint has none to hold it.
+    """
+    import dataclasses
+
+    from .export_check import Contract
+    from .robot import Frame
+    from .urdf import read_urdf
+
+    if robot.urdf is None:
+        reference, held = robot, dataclasses.replace(robot, terms=(), auto_beta=False)
+        ends, reason = (None, "tool0"), ""
+    else:
+        source = robot.urdf
+        reference = dataclasses.replace(robot, base=Frame(), auto_beta=False)
+        held = dataclasses.replace(reference, terms=(), auto_beta=False)
+        ends, reason = (source.base_link, source.tip_link), ""
+        if not file_origins(robot)[1]:
+            held = dataclasses.replace(held, tool=Frame(), auto_beta=False)
+            reason = (
+                f"the tool frame is not written: the chain ends at the movable joint "
+                f"{robot.joints[-1].name!r} (tip link {source.tip_link!r}), and a URDF has no "
+                "fixed joint there to hold it; add a fixed joint to a tool link in the URDF "
+                "and load it with tip_link= that link, or save as .toml"
+            )
+
+    def read(text: str):
+        back = read_urdf(text, label, *ends)
+        return dataclasses.replace(back, points=robot.points, auto_beta=False)
+
+    return Contract("a URDF", reference, held, read, tool_reason=reason)

@@ -88,15 +88,15 @@ def joint_to_lines(j: UrdfJoint, quote) -> list[str]:
         f"axis = {three(j.axis)}",
         f"xyz = {three(j.xyz)}",
         f"rpy = {three(j.rpy)}",
-        f"offset = {j.offset!r}",
+        f"offset = {float(j.offset)!r}",
     ]
     if j.limits is not None:
-        lines.append(f"limits = [{j.limits[0]!r}, {j.limits[1]!r}]")
+        lines.append(f"limits = [{float(j.limits[0])!r}, {float(j.limits[1])!r}]")
     if j.passive:
         items = [
             f"{{name = {quote(p.name)}, type = {quote(p.type)}, axis = {three(p.axis)}, "
             f"xyz = {three(p.xyz)}, rpy = {three(p.rpy)}, master = {p.master + 1}, "
-            f"multiplier = {p.multiplier!r}, offset = {p.offset!r}}}"
+            f"multiplier = {float(p.multiplier)!r}, offset = {float(p.offset)!r}}}"
             for p in j.passive
         ]
         lines.append("passive = [" + ", ".join(items) + "]")
