@@ -10,20 +10,21 @@ A fit that lands on either one, or stops on the symmetric point between them (wh
 tilts are blind to first order, but not to second), can call a robot the wrong shape by
 millimetres a success.
 
-`mirror_check` looks for such a second answer after a distance fit and turns what it finds
-into a line of the answer audit:
+`second_answers` looks for such a second answer after a distance fit and turns what it
+finds into a line of the answer audit:
 
 - *the mirror*: the fitted robot's tool points (at the measured poses and across the joint
-  ranges) reflected through their best plane, the model fitted to them (with a free base
-  frame), then to the measured distances;
-- *a tilt*: when parameters blind at the fitted robot become visible a small step away
-  from it (the fit sits on a symmetric point), the fit again from that step with them
-  free, and that result's mirror.
+  ranges) reflected through their best plane, the model fitted to them (every asked-for
+  parameter and the base frame free), then to the measured distances;
+- *steps off a symmetric point*: when held parameters become visible a small step away
+  from the fitted robot, the estimated parameters fitted again with each of them stepped
+  1, 3 and 10 mrad (or mm) either way: the profile of the cost along what the fit could
+  not see there.
 
-A second answer that differs from the estimate by more than the predicted error (from the
-covariance) or the noise fails the check: when it fits the distances as well as the
-estimate (within chance), the data cannot tell the two apart and the check names both;
-when it fits better, the fit stopped at the wrong point.
+A second answer that differs in shape from the estimate by more than the predicted error
+(from the covariance) or the noise fails the check: when it fits the distances as well as
+the estimate (within chance), the data cannot tell the two apart and the check names both,
+and the difference joins the predicted error; when it fits better, the fit stopped short.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from .analysis import analyse
 from .audit import CHI2_LEVEL, Check
 from .rank import chi2_quantile
 from .rounds import workspace_poses
+from .shapes import aligned_difference, shape_prediction
 from .solvers import SOLVERS
 
 STEPS = (1e-3, 3e-3, 1e-2)
@@ -53,6 +55,12 @@ MIRROR_MISS = 1e-3
 """RMS (m) by which the model may miss the reflected tool points and still be fitted to
 the distances from there: beyond it the mirror image is no robot of this model near the
 estimate (a spatial arm's chirality), and the fit to the distances would only climb back."""
+
+PULL = 1e-4
+"""Weight (m per m or rad) pulling the fit to the reflected points towards the estimate:
+the model's blind directions (d1 against the base height, α of the last link against the
+tool) would otherwise drift and show as differences that mean nothing; 1 mrad costs 0.1
+µm, far below what realises a mirror image, and the fit to the distances polishes after."""
 
 BASE = ("base_x", "base_y", "base_z", "base_rx", "base_ry", "base_rz")
 
@@ -153,127 +161,128 @@ def second_answers(
     q_shape = q if q_work is None else q_work
     q_all = q if q_work is None else np.vstack([q, q_work])
     predicted = shape_prediction(fitted, q_shape, estimated, cov)
-    correction = _shape(fitted, nominal, q_shape)[0]
-    allowed = max(predicted, noise_rms, 1e-9)
     scale = 1.0 if known else (2.0 * cost / dof if dof > 0 else 1.0)
-    margin = 0.5 * chi2_quantile(CHI2_LEVEL, 1) * scale + floor
+    judge = _Scale(
+        cost=cost,
+        margin=0.5 * chi2_quantile(CHI2_LEVEL, 1) * scale + floor,
+        scale=scale,
+        floor=floor,
+        known=known,
+        allowed=max(predicted, noise_rms, 1e-9),
+        predicted=predicted,
+        n_rows=make(fitted, []).residual(np.zeros(0)).size,
+    )
     solve = _solver(make, method, max_iterations, tolerance)
-
     mirror, miss = _mirror(make, fitted, names, estimated, q_all, solve)
-    found = [("mirror", mirror)]
-    found = [(kind, robot, ()) for kind, robot in found]
+    found = [("mirror", mirror, ())]
     found += [("tilt", tilt, (n,)) for n, tilt in _tilts(make, fitted, names, estimated, solve)]
     options = [
-        Alternative(kind, robot, _cost(make, robot), *_shape(robot, fitted, q_shape), stepped)
+        Alternative(
+            kind, robot, _cost(make, robot), *aligned_difference(robot, fitted, q_shape), stepped
+        )
         for kind, robot, stepped in found
         if robot is not None
     ]
     # second answers the data cannot reject add their difference to the predicted error
-    equal = [a for a in options if a.cost <= cost + margin]
-    spread = max((a.shape_rms for a in equal), default=0.0)
+    spread = max((a.shape_rms for a in options if judge.equal(a)), default=0.0)
     total = float(np.hypot(predicted, spread)) if q_work is not None else None
-    check = _verdict(
-        miss,
-        make(fitted, []).residual(np.zeros(0)).size,
-        options,
-        cost,
-        margin,
-        scale,
-        floor,
-        known,
-        allowed,
-        predicted,
-        nominal,
-        fitted,
-        names,
-        estimated,
-        q_shape,
-    )
+    check = _verdict(judge, options, miss, nominal, fitted, estimated, q_shape)
+    correction = aligned_difference(fitted, nominal, q_shape)[0]
     return SecondAnswers(check, total, correction)
 
 
-def _verdict(
-    miss,
-    n_rows,
-    options,
-    cost,
-    margin,
-    scale,
-    floor,
-    known,
-    allowed,
-    predicted,
-    nominal,
-    fitted,
-    names,
-    estimated,
-    q,
-) -> Check:
-    """The audit line for the second answers `options` of a fit of distance cost `cost`."""
-    unit = "noise variances" if known else "residual variances"
-    names = [n for n in names if n not in BASE]  # a rigid motion: no answer of its own
+@dataclass(frozen=True)
+class _Scale:
+    """How a fit of distance cost `cost` judges its second answers."""
+
+    cost: float
+    margin: float  # a cost difference within chance, in the cost's units
+    scale: float  # one noise (or residual) variance, in the cost's units
+    floor: float
+    known: bool
+    allowed: float  # m RMS: a shape difference within the prediction or the noise
+    predicted: float  # m RMS
+    n_rows: int
+
+    def equal(self, alt: Alternative) -> bool:
+        return alt.cost <= self.cost + self.margin
+
+    def matters(self, alt: Alternative) -> bool:
+        return alt.shape_rms > self.allowed
+
+
+def _verdict(judge: _Scale, options, miss, nominal, fitted, estimated, q) -> Check:
+    """The audit line for the second answers `options` (module doc); `miss`: by how much
+    the model missed the reflected points (m RMS)."""
     for alt in sorted(options, key=lambda a: a.cost):
-        if alt.shape_rms <= allowed or alt.cost > cost + margin:
-            continue
-        gap = (alt.cost - cost) / scale
-        values = _values(nominal, fitted, alt.robot, [*estimated, *alt.stepped], q)
-        differ = (
-            f"they differ by up to {alt.shape_max * 1e3:.3g} mm ({alt.shape_rms * 1e3:.3g} mm "
-            f"RMS) across the workspace, against a predicted error of {predicted * 1e3:.2g} mm"
-        )
-        if max(alt.cost, cost) <= floor:
-            how = "both to the rounding floor of the data"
-        else:
-            how = f"costs {abs(gap):.2g} {unit} apart, chance: up to {margin / scale:.3g}"
-        if alt.cost < cost - margin:
-            text = (
-                f"{values} fits these distances better ({-gap:.3g} {unit} lower, chance: up "
-                f"to {margin / scale:.3g}); {differ}: the fit stopped on the symmetric point "
-                "of a plane of motion, where the tilts out of it are blind to first order "
-                "but not to second"
-            )
-        else:
-            what = "the mirror image" if alt.kind == "mirror" else "a tilt out of the plane"
-            text = (
-                f"{what}: {values} fit these distances equally ({how}); {differ}: the "
-                f"error is at least {alt.shape_rms * 1e3:.3g} mm RMS"
-            )
-        return Check(
-            NAME,
-            False,
-            text + ". Distances are the same for a robot and its mirror image, and a planar arm's "
-            "mirror image is the same arm tilted the other way: they cannot tell which way "
-            "its plane of motion tilts (measure some positions, e.g. with a tracker, to tell "
-            "them apart; or, if the arm is known to move in a flat plane, leave the tilts out "
-            "of it (alpha*, beta*, tool_z) out of --parameters)",
-        )
+        if judge.matters(alt) and judge.equal(alt):
+            values = _values(nominal, fitted, alt.robot, [*estimated, *alt.stepped], q)
+            return Check(NAME, False, _failed(judge, alt, values))
     said = []
-    if miss > MIRROR_MISS:
+    if not np.isfinite(miss) and not options:
+        return Check(NAME, None, "the model could not be fitted to the mirror image of its points")
+    if MIRROR_MISS < miss < np.inf:
         said.append(
             "no robot of this model near the estimate realises the mirror image of its tool "
             f"points (the closest misses them by {miss * 1e3:.3g} mm RMS)"
         )
-    apart = [a for a in options if a.shape_rms > allowed]
+    apart = [a for a in options if judge.matters(a)]
     if apart:
         best = min(apart, key=lambda a: a.cost)
         what = "mirror image" if best.kind == "mirror" else "step off the estimate"
-        if known:
+        if judge.known:
             worse = (
-                f"{(best.cost - cost) / scale:.3g} noise variances worse (chance: up to "
-                f"{margin / scale:.3g})"
+                f"{(best.cost - judge.cost) / judge.scale:.3g} noise variances worse (chance: "
+                f"up to {judge.margin / judge.scale:.3g})"
             )
         else:  # unweighted: the cost is half the sum of squared residuals, m²
             worse = (
-                f"to {np.sqrt(2 * best.cost / n_rows) * 1e3:.3g} mm RMS, the estimate to "
-                f"{np.sqrt(2 * cost / n_rows) * 1e3:.3g} mm"
+                f"to {np.sqrt(2 * best.cost / judge.n_rows) * 1e3:.3g} mm RMS, the estimate "
+                f"to {np.sqrt(2 * judge.cost / judge.n_rows) * 1e3:.3g} mm"
             )
         said.append(f"the best {what} that differs in shape fits these distances {worse}")
     if not said:
         said.append(
             "the mirror image of the fitted tool points is the fitted robot itself, within "
-            f"the predicted error of {predicted * 1e3:.2g} mm or the noise"
+            f"the predicted error of {judge.predicted * 1e3:.2g} mm or the noise"
         )
     return Check(NAME, True, "; ".join(said))
+
+
+def _failed(judge: _Scale, alt: Alternative, values: str) -> str:
+    """What a failing line says of `alt`, a second answer as good as the estimate or
+    better, whose parameters `values` shows."""
+    unit = "noise variances" if judge.known else "residual variances"
+    gap = (alt.cost - judge.cost) / judge.scale
+    chance = f"chance: up to {judge.margin / judge.scale:.3g}"
+    differ = (
+        f"they differ by up to {alt.shape_max * 1e3:.3g} mm ({alt.shape_rms * 1e3:.3g} mm "
+        f"RMS) across the workspace, against a predicted error of {judge.predicted * 1e3:.2g} mm"
+    )
+    if alt.cost < judge.cost - judge.margin:
+        text = (
+            f"{values} fits these distances better ({-gap:.3g} {unit} lower, {chance}); "
+            f"{differ}: the fit stopped short of the best answer (a planar arm's fit stops "
+            "on the flat point, where the tilts out of its plane are blind to first order "
+            "but not to second)"
+        )
+    else:
+        if max(alt.cost, judge.cost) <= judge.floor:
+            how = "both to the rounding floor of the data"
+        else:
+            how = f"costs {abs(gap):.2g} {unit} apart, {chance}"
+        what = "the mirror image" if alt.kind == "mirror" else "a step off the estimate"
+        text = (
+            f"{what}: {values} fit these distances equally ({how}); {differ}: the error is "
+            f"at least {alt.shape_rms * 1e3:.3g} mm RMS"
+        )
+    return text + (
+        ". Distances are the same for a robot and its mirror image, and a planar arm's "
+        "mirror image is the same arm tilted the other way: they cannot tell which way its "
+        "plane of motion tilts (measure some positions, e.g. with a tracker, to tell them "
+        "apart; or, if the arm is known to move in a flat plane, leave the tilts out of it "
+        "(alpha*, beta*, tool_z) out of --parameters)"
+    )
 
 
 def _cost(make, robot: Robot) -> float:
@@ -346,17 +355,18 @@ def _mirror(
 
 def _fit_points(robot: Robot, names, q, target) -> Robot | None:
     """Least-squares fit of the deviations of `names` so that ``robot.position(q)`` meets
-    `target` (N, 3); None when it fails."""
+    `target` (N, 3), pulled weakly to zero (`PULL`); None when it fails."""
     from scipy.optimize import least_squares  # scipy loads slowly; only fits need it
 
     def at(x):
         return robot.with_deviations(dict(zip(names, x.tolist(), strict=True)))
 
     def residual(x):
-        return (at(x).position(q) - target).ravel()
+        return np.concatenate([(at(x).position(q) - target).ravel(), PULL * x])
 
     def jacobian(x):
-        return at(x).position_jacobian(q, list(names))[0].reshape(-1, len(names))
+        J = at(x).position_jacobian(q, list(names))[0].reshape(-1, len(names))
+        return np.vstack([J, PULL * np.eye(len(names))])
 
     try:
         out = least_squares(
@@ -370,48 +380,6 @@ def _fit_points(robot: Robot, names, q, target) -> Robot | None:
     except (ValueError, np.linalg.LinAlgError):
         return None
     return at(out.x) if np.all(np.isfinite(out.x)) else None
-
-
-def _shape(a: Robot, b: Robot, q) -> tuple[float, float]:
-    """RMS and largest distance (m) between the tool points of `a` and `b` at `q` after
-    the best proper rigid motion (a rotation, never a reflection)."""
-    pa, pb = a.position(q), b.position(q)
-    pa, pb = pa - pa.mean(axis=0), pb - pb.mean(axis=0)
-    U, _, Vt = np.linalg.svd(pa.T @ pb)
-    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
-    e = np.linalg.norm(pa @ R - pb, axis=1)
-    return float(np.sqrt(np.mean(e**2))), float(e.max())
-
-
-def shape_prediction(robot: Robot, q, estimated, cov) -> float:
-    """RMS error (m) of the tool points at `q` that the covariance predicts, rigid motions
-    of the whole cloud left out (distances cannot see them, nor need to).
-
-    Parameters
-    ----------
-    robot : Robot
-    q : ndarray, shape (N, dof)
-    estimated : sequence of str
-        The k estimated parameters.
-    cov : ndarray, shape (k, k)
-        Their covariance.
-    """
-    if not estimated:
-        return 0.0
-    if not np.all(np.isfinite(cov)):
-        return float("inf")
-    J = robot.position_jacobian(q, list(estimated))[0].reshape(-1, len(estimated))
-    p = robot.position(q)
-    p = p - p.mean(axis=0)
-    # small rigid motions of the cloud: a translation t and a rotation ω, δp = t + ω × p
-    rigid = np.zeros((len(p), 3, 6))
-    rigid[:, :, :3] = np.eye(3)
-    rigid[:, 0, 4], rigid[:, 0, 5] = p[:, 2], -p[:, 1]
-    rigid[:, 1, 3], rigid[:, 1, 5] = -p[:, 2], p[:, 0]
-    rigid[:, 2, 3], rigid[:, 2, 4] = p[:, 1], -p[:, 0]
-    basis = np.linalg.qr(rigid.reshape(-1, 6))[0]
-    J = J - basis @ (basis.T @ J)
-    return float(np.sqrt(max(np.einsum("ik,kl,il->", J, cov, J) / len(q), 0.0)))
 
 
 def _values(nominal: Robot, a: Robot, b: Robot, names, q, most: int = 3) -> str:
