@@ -20,11 +20,12 @@ from ..design.poses import rng_from
 from ..errors import CalibrationError
 from ..model.robot import Robot, check_joint_values
 from .analysis import analyse, represent, selection
-from .audit import Facts, audit, smoothness
+from .audit import Audit, Facts, audit, smoothness
 from .calibration import Calibration
 from .evidence import outside_gain, still_joints
 from .fit import METHODS, check_iterations, verdict
 from .linalg import Reduction, gauss_newton_step
+from .mirror import second_answers
 from .rounds import MAX_ROUNDS, workspace_poses
 from .solvers import ROUNDING, SOLVERS, floor_cost
 from .uncertainty import uncertainty
@@ -237,13 +238,31 @@ def identify_distances(
     q_pairs = np.hstack(
         [measurements.q[measurements.pairs[:, 0]], measurements.q[measurements.pairs[:, 1]]]
     )
+    floor = floor_cost(problem, ROUNDING)
+    # distances cannot see a reflection: a planar arm's mirror image fits them too
+    second = second_answers(
+        lambda at, which: _DistanceProblem(at, measurements, w, which),
+        fit.robot,
+        robot,
+        names,
+        fit.estimated,
+        cov,
+        q=measurements.q,
+        known=known,
+        dof=r.size - len(fit.estimated),
+        floor=floor,
+        noise_rms=float(np.mean(measurements.sigma) if known else np.sqrt(np.mean((r / w) ** 2))),
+        method=method,
+        max_iterations=max_iterations,
+        tolerance=tolerance,
+    )
     checks = audit(
         Facts(
             solver_status=fit.status,
             solver_message=fit.message,
             cost_start=0.5 * float(r0 @ r0),
             cost_final=0.5 * float(r @ r),
-            floor=floor_cost(problem, ROUNDING),
+            floor=floor,
             predicted_decrease=gauss_newton_step(J, r)[1],
             known=known,
             dof=r.size - len(fit.estimated),
@@ -251,8 +270,10 @@ def identify_distances(
             rms_final=float(np.sqrt(np.mean((r / w) ** 2))),
             settled=fit.settled,
             rounds=fit.rounds,
-            predicted_rms=None,
-            prediction_note="distances: no frame in which to predict positions",
+            predicted_rms=second.predicted_rms,
+            correction_rms=second.correction_rms,
+            noise_rms=float(np.mean(measurements.sigma)),
+            prediction_note="no joint limits to draw poses from",
             one_shot=method == "svd",
             n_points=r.size,
             n_estimated=len(fit.estimated),
@@ -266,7 +287,13 @@ def identify_distances(
             still=still_joints(measurements.q, robot),
         )
     )
+    checks = Audit((*checks.checks, second.check))
     status, message = verdict(checks, fit.status, fit.message)
+    if second.check.passed is False:
+        # the second answer explains a prediction that fails with it: name it first
+        others = [c.name for c in checks.failures if c is not second.check]
+        also = f" (also failed: {', '.join(others)})" if others else ""
+        message = f"failed the answer audit: {second.check.name}: {second.check.text}{also}"
     at_end = _DistanceProblem(fit.robot, measurements, w, names)
     cal = Calibration(
         method=method,
