@@ -92,8 +92,9 @@ def registration_poses(nominal: Robot) -> np.ndarray:
         limits = nominal.limits
     except CalibrationError as exc:
         raise CalibrationError(
-            f"{exc}: compensation in the robot's frame aligns the nominal robot to the "
-            "calibrated one over poses across the joint ranges"
+            f"{exc}: compensation aligns the nominal robot to the calibrated one over poses "
+            "across the joint ranges (to place the robot's frame, and to check they are one "
+            "robot)"
         ) from None
     rng = np.random.default_rng(0)
     return rng.uniform(limits[:, 0], limits[:, 1], size=(REGISTRATION_POSES, nominal.dof))
@@ -192,7 +193,7 @@ def compensate(
         X = np.eye(4)
     target = X @ nominal.fk(q_t)
     rows = slice(None) if calibrated.dof >= 6 else slice(0, 3)
-    found = solve(calibrated, q_t, target, rows, max_iterations)
+    found = solve(calibrated, q_t, target, rows, max_iterations, scale=nominal)
     ok, reason = _judge(calibrated, q_t, found, rows)
     q = np.where(ok[:, None], found.q, q_t)
     e = pose_errors(calibrated, q, target)  # where the returned values put the tool

@@ -101,7 +101,12 @@ def levers(J: np.ndarray, length: float) -> np.ndarray:
 
 
 def solve(
-    robot: Robot, q_start: np.ndarray, target: np.ndarray, rows: slice, max_iterations: int
+    robot: Robot,
+    q_start: np.ndarray,
+    target: np.ndarray,
+    rows: slice,
+    max_iterations: int,
+    scale: Robot | None = None,
 ) -> Solution:
     """Joint values near `q_start` that bring `robot`'s tool to `target`.
 
@@ -120,16 +125,21 @@ def solve(
     rows : slice
         Which of (x, y, z, rx, ry, rz) must match: all six, or the position.
     max_iterations : int
+    scale : Robot, optional
+        The robot whose levers and size scale the joints (default `robot`). The nominal
+        robot: then the metric, and with it the minimum-norm answer of a redundant arm,
+        does not depend on parameters the calibration could not see.
 
     Returns
     -------
     Solution
     """
-    length = characteristic_length(robot)
+    scale = robot if scale is None else scale
+    length = characteristic_length(scale)
     w = _weights(rows, length)
-    J0 = joint_jacobian(robot, q_start, slice(None))
-    ell = levers(J0, length)
-    A0 = J0[:, rows, :] * w[None, :, None] / ell[:, None, :]
+    ell = levers(joint_jacobian(scale, q_start, slice(None)), length)
+    J0 = joint_jacobian(robot, q_start, rows)
+    A0 = J0 * w[None, :, None] / ell[:, None, :]
     s0 = np.linalg.svd(A0, compute_uv=False)
     singular = s0[:, -1] <= SINGULAR * s0[:, 0]
     condition = s0[:, 0] / np.maximum(s0[:, -1], 1e-300)
