@@ -16,10 +16,12 @@ def add_command(command) -> None:
         help="correct joint targets so the real robot reaches where the nominal one would",
         description="Read joint targets (columns q1_deg ... or q1 ...) that a controller "
         "sends to the nominal robot, and write the joint values that bring the calibrated "
-        "robot's tool to the same pose (its position for arms of fewer than six joints), "
-        "in the robot's own base frame. One row out per row in, in degrees (mm for "
-        "prismatic joints), with ok = 0 and a reason where a target cannot be corrected "
-        "(singular, no convergence, outside the joint limits): those rows keep the target.",
+        "robot's tool to the nominal robot's pose at those targets (its position for arms "
+        "of fewer than six joints). One row out per row in, in degrees (mm for prismatic "
+        "joints), with ok = 0 and a reason where a target cannot be corrected (at or near "
+        "a singularity, where the correction would be far larger than the calibration "
+        "errors justify; not reached; outside the joint limits): those rows keep the "
+        "target.",
     )
     p.add_argument("robot", metavar="CALIBRATED", help="calibrated robot file (.toml or .urdf)")
     p.add_argument("targets", metavar="CSV", help="joint targets ('-' for standard input)")
@@ -28,6 +30,18 @@ def add_command(command) -> None:
         "--nominal",
         metavar="ROBOT",
         help="the robot the controller believes (default: calibrated_from in the file)",
+    )
+    p.add_argument(
+        "--frame",
+        choices=("robot", "instrument"),
+        default="robot",
+        help="where the targets' poses live. 'robot' (default): the robot's base frame as "
+        "the controller defines it, the nominal robot placed where it best fits the "
+        "calibrated one; errors that look like a moved base (joint 1's zero, its height) "
+        "are left to the base frame, however the calibration split them. 'instrument': "
+        "the frame the calibration was measured in, with the nominal robot's base frame "
+        "giving where the base stands in it (measured, or a simulation); every error is "
+        "corrected, base-like ones too",
     )
     p.set_defaults(func=run)
 
@@ -42,13 +56,14 @@ def run(args: argparse.Namespace) -> None:
     nominal = cli.robot_for(args, args.nominal) if args.nominal else None
     df, label = read_table(args.targets, "targets file")
     q = read_joints(df, calibrated, label)
-    result = compensate(calibrated, q, nominal)
+    result = compensate(calibrated, q, nominal, frame=args.frame)
     columns = {}
     for i, joint in enumerate(calibrated.joints, start=1):
         scale, unit = (180 / np.pi, "deg") if joint.type == "R" else (1e3, "mm")
         columns[f"q{i}_{unit}"] = result.q[:, i - 1] * scale
     columns["ok"] = result.ok.astype(int)
     columns["position_error_mm"] = result.position_error * 1e3
+    columns["orientation_error_mrad"] = result.orientation_error * 1e3
     columns["reason"] = list(result.reason)
     import pandas as pd
 

@@ -2,30 +2,51 @@
 parameters.
 
 The controller believes the nominal robot: sent joint values q_t, it expects the tool at
-``T_nominal(q_t)``. The real robot (the calibrated model) puts it at ``T_calibrated(q_t)``
-instead. Sending the joint values q with ``T_calibrated(q) = T_nominal(q_t)`` puts the
-tool where the controller meant. Newton iterations on the exact joint Jacobian, all poses
-at once; the full tool pose for arms of six or more joints, its position for fewer.
+the nominal robot's pose at q_t. The real robot (the calibrated model) puts it elsewhere.
+Sending the joint values q at which the calibrated robot reaches that pose puts the tool
+where the controller meant. What "that pose" is depends on the frame the targets live in
+(`compensate`'s ``frame``):
 
-Both robots are taken in their own base frames: a calibrated base frame holds where the
-instrument stood, which the controller never knew.
+- ``"robot"``: the robot's own base frame. Where a calibration puts the base frame and
+  where the first joints is a blind split (a turn of joint 1 and a turn of the base look
+  alike to any instrument), so the base frame is defined by the robot itself: the nominal
+  robot placed where it best fits the calibrated one (`registration`). The answer does
+  not depend on how the calibration split a blind combination.
+- ``"instrument"``: the frame the calibration was measured in, for a user who knows where
+  the base stands in it (the nominal robot's base frame says so): the calibrated robot,
+  with its fitted base, must reach the nominal robot's pose.
+
+The search itself (`casecal.model.compensate_solve`) starts at the targets' joint values and
+takes the smallest joint change; a row whose change is far larger than the pose difference
+can justify (near a singularity) is refused with the joint and the numbers.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import CalibrationError
-from . import kinematics
-from .frames import rotation_vector
-from .robot import Frame, Robot, check_joint_values
+from .compensate_solve import (
+    AMPLIFICATION,
+    REACHED,
+    aligned_axes,
+    pose_errors,
+    solve,
+)
+from .frames import rigid_fit
+from .robot import Robot, check_joint_values
 
-TOLERANCE = 1e-12  # m and rad: a Newton step this small has converged
-SINGULAR = 1e-9  # smallest over largest singular value of the joint Jacobian
-REACHED = 1e-9  # m and rad: a row whose tool ends farther off than this has failed
+FRAMES = ("robot", "instrument")
+REGISTRATION_POSES = 200
+"""Poses, uniform in the nominal robot's joint ranges (seed 0), that `registration` fits."""
+NEAR = AMPLIFICATION
+"""Condition number of the scaled joint Jacobian above which a failure is said to be near
+a singularity (random poses of six-axis arms: half of them under 10)."""
+GROSS = 0.05
+"""m: nominal and calibrated tool points farther apart than this (RMS) are not one robot
+with calibration errors."""
 
 
 @dataclass(frozen=True)
@@ -37,14 +58,22 @@ class Compensation:
     q : ndarray, shape (N, dof)
         Joint values to send, rad (R) or m (P); the target itself on rows that failed.
     ok : ndarray of bool, shape (N,)
-        Converged, not singular and within the joint limits.
+        Converged to the target, not near a singularity (the correction is no larger than
+        the pose difference justifies) and within the joint limits.
     position_error, orientation_error : ndarray, shape (N,)
         Where the calibrated robot's tool ends at the returned values, against the target,
         m and rad (0 for an arm of fewer than six joints, where only the position is
         matched); on a failed row, the error the uncorrected target leaves.
     reason : tuple of str
-        Per row: "" when `ok`, else "singular", "no convergence", "out of reach (…)" or
-        "outside the limits of joint k".
+        Per row: "" when `ok`, else why not, in words and numbers ("near a singularity
+        (axes of joints 4 and 6 0.4° apart): the correction would turn joint 4 by 41°
+        ...", "at a singularity", "no convergence", "out of reach", "outside the limits
+        of joint k").
+    frame : str
+        "robot" or "instrument" (see `compensate`).
+    registration : ndarray, shape (4, 4)
+        The nominal robot's world frame in the calibrated robot's: for ``frame="robot"``
+        the best fit (see `registration`), for ``"instrument"`` the identity.
     """
 
     q: np.ndarray
@@ -52,43 +81,142 @@ class Compensation:
     position_error: np.ndarray
     orientation_error: np.ndarray
     reason: tuple[str, ...]
+    frame: str = "robot"
+    registration: np.ndarray | None = None
 
 
-def _without_base(robot: Robot) -> Robot:
-    return dataclasses.replace(robot, base=Frame(), auto_beta=False)
+def registration_poses(nominal: Robot) -> np.ndarray:
+    """The poses `registration` fits: `REGISTRATION_POSES` uniform in the nominal robot's
+    joint ranges (±180° for a revolute joint without limits), seed 0; (n, dof), rad or m."""
+    try:
+        limits = nominal.limits
+    except CalibrationError as exc:
+        raise CalibrationError(
+            f"{exc}: compensation aligns the nominal robot to the calibrated one over poses "
+            "across the joint ranges (to place the robot's frame, and to check they are one "
+            "robot)"
+        ) from None
+    rng = np.random.default_rng(0)
+    return rng.uniform(limits[:, 0], limits[:, 1], size=(REGISTRATION_POSES, nominal.dof))
 
 
-def _errors(calibrated: Robot, q: np.ndarray, target: np.ndarray) -> np.ndarray:
-    T = calibrated.fk(q)
-    rot = rotation_vector(target[:, :3, :3] @ np.transpose(T[:, :3, :3], (0, 2, 1)))
-    return np.concatenate([target[:, :3, 3] - T[:, :3, 3], rot], axis=1)
+def registration(nominal: Robot, calibrated: Robot) -> tuple[np.ndarray, float, float]:
+    """The rigid transform that best aligns the nominal robot's tool points to the
+    calibrated robot's over `registration_poses` (least squares).
+
+    The calibrated robot's tool points, its base frame times its chain, do not depend on
+    how the fit split a blind combination between the base and the joints, so neither
+    does this transform.
+
+    Returns
+    -------
+    X : ndarray, shape (4, 4)
+        Nominal world frame to calibrated world frame, m.
+    before, after : float
+        RMS distance of the tool points without and with X, m.
+    """
+    q = registration_poses(nominal)
+    p_nominal, p_calibrated = nominal.position(q), calibrated.position(q)
+    R, t = rigid_fit(p_nominal, p_calibrated)
+    X = np.eye(4)
+    X[:3, :3], X[:3, 3] = R, t
+    rms = lambda d: float(np.sqrt(np.mean(np.sum(d**2, axis=1))))  # noqa: E731
+    return X, rms(p_calibrated - p_nominal), rms(p_calibrated - p_nominal @ R.T - t)
 
 
 def compensate(
-    calibrated: Robot, q_targets, nominal: Robot | None = None, max_iterations: int = 30
+    calibrated: Robot,
+    q_targets,
+    nominal: Robot | None = None,
+    max_iterations: int = 30,
+    frame: str = "robot",
 ) -> Compensation:
     """Joint values that bring `calibrated` to where `nominal` would be at `q_targets`.
 
     Parameters
     ----------
     calibrated : Robot
-        The real robot, as identified.
+        The real robot, as identified (with its fitted base frame).
     q_targets : array-like, shape (N, dof) or (dof,)
         The joint values the program sends today, rad (R) or m (P).
     nominal : Robot, optional
         The robot the controller believes; default the one `calibrated` was calibrated
         from (its ``calibrated_from``).
     max_iterations : int
+    frame : {"robot", "instrument"}
+        What the target is. ``"robot"`` (default): the nominal robot's tool pose at
+        `q_targets` in the robot's base frame as the controller defines it, i.e. the
+        nominal robot placed where it best fits the calibrated one (`registration`:
+        least squares over the tool points of 200 poses across the joint ranges, seed 0).
+        A base-like error (joint 1's zero, its height) is then part of the base frame and
+        left alone, whichever way the calibration split it between base and joints.
+        ``"instrument"``: the nominal robot's tool pose, with the nominal robot's own base
+        frame, in the frame the calibration was measured in; for a user who measured where
+        the base stands (or a simulation). Every error, base-like ones included, is then
+        corrected.
 
     Returns
     -------
     Compensation
+
+    Notes
+    -----
+    Arms of six or more joints match the full tool pose, fewer the position. Positions
+    are as good as the calibration; orientations only where its data could see them. From
+    positions of one point per pose the tool's turn about that point is blind (a turn of
+    the last joint about an axis through it, a last joint and the tool offset turned
+    against each other, the tool frame's own angles): the fit keeps such a combination at
+    one value of its choice, the real tool may stand turned by the unknown rest at the
+    returned joint values, and two fits that chose differently return different joints;
+    the position reached is the same. Measured orientations (or several points per pose)
+    make the orientation as good as the position.
+
+    Raises
+    ------
+    CalibrationError
+        No nominal robot, joint counts that differ, an unknown frame, or nominal and
+        calibrated robots more than 50 mm apart (RMS over the poses): another robot,
+        another tool, or for ``"instrument"`` a nominal base frame that is not where the
+        instrument saw the robot.
     """
+    if frame not in FRAMES:
+        raise CalibrationError(
+            f"unknown compensation frame {frame!r}; use 'robot' (targets in the robot's base "
+            "frame, the default) or 'instrument' (in the frame the calibration was measured "
+            "in); frame= in Python, --frame on the command line"
+        )
+    nominal = _nominal(calibrated, nominal)
+    q_t, _ = check_joint_values(q_targets, calibrated.dof)
+    X, before, after = registration(nominal, calibrated)
+    _check_same_robot(frame, before, after)
+    if frame == "instrument":
+        X = np.eye(4)
+    target = X @ nominal.fk(q_t)
+    rows = slice(None) if calibrated.dof >= 6 else slice(0, 3)
+    found = solve(calibrated, q_t, target, rows, max_iterations, scale=nominal)
+    ok, reason = _judge(calibrated, q_t, found, rows)
+    q = np.where(ok[:, None], found.q, q_t)
+    e = pose_errors(calibrated, q, target)  # where the returned values put the tool
+    return Compensation(
+        q=q,
+        ok=ok,
+        position_error=np.linalg.norm(e[:, :3], axis=1),
+        orientation_error=np.linalg.norm(e[:, 3:], axis=1)
+        if calibrated.dof >= 6
+        else np.zeros(len(q)),
+        reason=tuple(reason),
+        frame=frame,
+        registration=X,
+    )
+
+
+def _nominal(calibrated: Robot, nominal: Robot | None) -> Robot:
     if nominal is None:
         if not calibrated.calibrated_from:
             raise CalibrationError(
-                "compensate needs the nominal robot: pass nominal=, or use a robot file "
-                "written by identify (it records calibrated_from)"
+                "compensate needs the nominal robot (the one the controller believes): give "
+                "it with --nominal ROBOT on the command line, nominal= in Python, or use a "
+                "robot file written by identify (it records calibrated_from)"
             )
         from .catalog import nominal_of
 
@@ -97,48 +225,90 @@ def compensate(
         raise CalibrationError(
             f"the nominal robot has {nominal.dof} joints, the calibrated one {calibrated.dof}"
         )
-    q_t, _ = check_joint_values(q_targets, calibrated.dof)
-    real, believed = _without_base(calibrated), _without_base(nominal)
-    target = believed.fk(q_t)
-    rows = slice(None) if real.dof >= 6 else slice(0, 3)
-    chain = kinematics.chain(real.structure)
-    q = q_t.copy()
-    converged = np.zeros(len(q), dtype=bool)
-    singular = np.zeros(len(q), dtype=bool)
-    for _ in range(max_iterations):
-        e = _errors(real, q, target)[:, rows]
-        J = chain.evaluate("joint_jacobian", q, real.vector())[:, rows, :]
-        s = np.linalg.svd(J, compute_uv=False)
-        singular = s[:, -1] <= SINGULAR * s[:, 0]
-        step = np.einsum("nij,nj->ni", np.linalg.pinv(J), e)
-        q = q + np.where(singular[:, None], 0.0, step)
-        # a step this small, or an error this small (it cannot shrink below rounding)
-        converged = (np.max(np.abs(step), axis=1) < TOLERANCE) | (
-            np.max(np.abs(e), axis=1) < TOLERANCE
+    return nominal
+
+
+def _check_same_robot(frame: str, before: float, after: float) -> None:
+    if after > GROSS:
+        raise CalibrationError(
+            f"the nominal and calibrated robots' tool points are {after * 1e3:.3g} mm apart "
+            "(RMS over poses across the joint ranges, after the best rigid alignment): more "
+            "than calibration errors; is the nominal robot (nominal=, --nominal) the one this "
+            "was calibrated from, with the same tool?"
         )
-        if np.all(converged | singular):
-            break
-    e = _errors(real, q, target)
-    miss = np.max(np.abs(e[:, rows]), axis=1)
+    if frame == "instrument" and before > GROSS:
+        raise CalibrationError(
+            f"frame='instrument' (--frame instrument): the nominal robot's tool points are "
+            f"{before * 1e3:.4g} mm (RMS) from where the calibration puts the robot in the "
+            "instrument's frame; give the nominal robot the base frame measured in the "
+            "instrument's frame, or use frame='robot' (--frame robot, the default: targets "
+            "in the robot's base frame)"
+        )
+
+
+def _judge(robot: Robot, q_t: np.ndarray, found, rows: slice) -> tuple[np.ndarray, list[str]]:
+    """Per row: usable, and if not, why (words and numbers)."""
+    q = found.q
     # a joint without limits (continuous) turns freely: its default range is for sampling
-    lo = np.array([-np.inf if j.limits is None else j.limits[0] for j in real.joints])
-    hi = np.array([np.inf if j.limits is None else j.limits[1] for j in real.joints])
-    outside = (q[:, : real.dof] < lo - 1e-12) | (q[:, : real.dof] > hi + 1e-12)
-    ok = converged & (miss <= REACHED) & ~outside.any(axis=1)
+    lo = np.array([-np.inf if j.limits is None else j.limits[0] for j in robot.joints])
+    hi = np.array([np.inf if j.limits is None else j.limits[1] for j in robot.joints])
+    outside = (q < lo - 1e-12) | (q > hi + 1e-12)
+    too_far = found.amplification > AMPLIFICATION
+    ok = (
+        found.converged
+        & ~found.singular
+        & (found.miss <= REACHED)
+        & ~too_far
+        & ~outside.any(axis=1)
+    )
+    position_only = rows != slice(None)
+    off = "mm off" if position_only else "mm or mrad off"
     reason = [""] * len(q)
     for k in np.flatnonzero(~ok):  # words only for the rows that need them
-        if not converged[k]:
-            reason[k] = "singular" if singular[k] else "no convergence"
-        elif miss[k] > REACHED:
-            reason[k] = f"out of reach ({miss[k] * 1e3:.3g} mm or mrad off)"
+        dp, dphi = found.difference[k]
+        difference = f"{dp * 1e3:.3g} mm" + ("" if position_only else f" and {dphi * 1e3:.3g} mrad")
+        if found.singular[k]:
+            reason[k] = (
+                "at a singularity: the joints cannot move the tool in every direction here "
+                f"(condition number {found.condition[k]:.2g})"
+            )
+        elif not found.converged[k] or found.miss[k] > REACHED:
+            words = "not reached" if not found.converged[k] else "out of reach"
+            if found.condition[k] > NEAR:
+                words += f" near a singularity (condition number {found.condition[k]:.3g})"
+            reason[k] = (
+                f"{words}: the nearest joint values found leave the tool "
+                f"{found.miss[k] * 1e3:.3g} {off}"
+            )
+        elif too_far[k]:
+            reason[k] = _near_singular(robot, q_t[k], q[k] - q_t[k], difference)
         else:
-            reason[k] = f"outside the limits of joint {int(np.argmax(outside[k])) + 1}"
-    q = np.where(ok[:, None], q, q_t)
-    e = _errors(real, q, target)  # where the returned values put the tool
-    return Compensation(
-        q=q,
-        ok=ok,
-        position_error=np.linalg.norm(e[:, :3], axis=1),
-        orientation_error=np.linalg.norm(e[:, 3:], axis=1) if real.dof >= 6 else np.zeros(len(q)),
-        reason=tuple(reason),
+            j = int(np.argmax(outside[k]))
+            limit = lo[j] if q[k, j] < lo[j] else hi[j]
+            reason[k] = (
+                f"outside the limits of joint {j + 1}: the correction would take it to "
+                f"{_amount(robot, j, q[k, j])}, beyond its limit {_amount(robot, j, limit)}"
+            )
+    return ok, reason
+
+
+def _amount(robot: Robot, j: int, value: float) -> str:
+    if robot.joints[j].type == "R":
+        return f"{np.rad2deg(value):.3g}°"
+    return f"{value * 1e3:.4g} mm"
+
+
+def _near_singular(robot: Robot, q: np.ndarray, dq: np.ndarray, difference: str) -> str:
+    axes = aligned_axes(robot, q)
+    where = (
+        f" (axes of joints {axes[0]} and {axes[1]} {np.rad2deg(axes[2]):.2g}° apart)"
+        if axes
+        else ""
+    )
+    j = int(np.argmax(np.abs(dq)))
+    verb = "turn" if robot.joints[j].type == "R" else "move"
+    return (
+        f"near a singularity{where}: the correction would {verb} joint {j + 1} by "
+        f"{_amount(robot, j, dq[j])} for a pose difference of {difference}; a correction "
+        "that large is not one calibration errors justify"
     )
