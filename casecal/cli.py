@@ -151,7 +151,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         )
     if not cal.success:
         raise CalibrationError(f"the fit did not pass ({cal.message}); nothing written")
-    cal = _without_poorly_determined(cal, meas, options)
+    cal = _without_poorly_determined(cal, meas, options, args.strict)
     # what was asked to be written is written as soon as the fit is good
     _write_outputs(args, cal)
     if held is not None:
@@ -163,32 +163,37 @@ def _cmd_identify(args: argparse.Namespace) -> None:
             raise CalibrationError(f"hold-out validation failed{written}: {exc}") from None
 
 
-def _without_poorly_determined(cal, meas, options):
+def _without_poorly_determined(cal, meas, options, strict):
     """The calibration to write: poorly determined estimates held at nominal, the rest
     refitted (`casecal.identification.usable`); a refit that fails writes nothing."""
     from .identification.calibration import display_unit
-    from .identification.usable import hold_poorly_determined
+    from .identification.usable import held_as_poorly_determined, hold_poorly_determined
 
-    if not cal.poorly_determined:
+    poorly = held_as_poorly_determined(cal)
+    if not poorly:
         return cal
     shown = []
-    for name in cal.poorly_determined:
+    for name in poorly:
         unit, factor = display_unit(name)
         shown.append(f"{name} ± {cal.standard_errors[name] * factor:.3g} {unit}")
     print(
         f"\n{', '.join(shown)}: poorly determined, so not written: held at nominal and the "
-        "other parameters refitted without them"
+        "other parameters refitted without them. The calibration written:\n"
     )
     refit = hold_poorly_determined(cal, meas, **options)
+    print(refit.summary())
+    held = [n for n in cal.parameters if n not in refit.parameters]
     if not refit.success:
         raise CalibrationError(
-            f"with {', '.join(cal.poorly_determined)} held at nominal the fit does not pass "
+            f"with {', '.join(held)} held at nominal the fit does not pass "
             f"({refit.message}); nothing written: measure more, better-spread poses, or "
             "leave these parameters out of --parameters"
         )
-    print(
-        f"refit: {refit.message}; RMS {refit.rms * 1e3:.4g} mm (with them: {cal.rms * 1e3:.4g} mm)"
-    )
+    if strict and refit.unidentifiable:
+        raise CalibrationError(
+            f"--strict: the data cannot identify {', '.join(refit.unidentifiable)}; ask for "
+            "fewer parameters or measure more varied poses (nothing written)"
+        )
     return refit
 
 

@@ -194,9 +194,9 @@ class Facts:
     """Estimated parameters on one of their bounds (None when no bounds were given)."""
     bound_gain: float = 0.0
     """Cost decrease freeing those from their bounds would add to the free ones'."""
-    lack_of_fit: tuple[float, int, float, int] | None = None
-    """Without σ: (gain, directions, cost, dof) of a smooth basis of the joint values
-    beside the estimates (`casecal.identification.lack_of_fit`)."""
+    lack_of_fit: object = None
+    """Without σ: the `casecal.identification.lack_of_fit.LackOfFit` of smooth joint
+    errors beside the estimates (None: not judged)."""
     rms_before: float | None = None
     """RMS error (m) of the nominal robot with its frames fitted, the uncalibrated error
     (`casecal.identification.reference`); None: `rms_start`."""
@@ -331,7 +331,8 @@ def _noise(f: Facts) -> Check:
                 "σ (--noise, or a sigma_mm column) and the fit is judged against it"
             )
     if f.lack_of_fit is not None and not at_floor:
-        matter, statistic, bound = held_matter(*f.lack_of_fit, known=False)
+        lof = f.lack_of_fit
+        matter, statistic, bound = held_matter(lof.gain, lof.n_extra, lof.cost, lof.dof, False)
         text += (
             f"; smooth functions of the joint values explain {statistic:.3g}× more per "
             f"direction than what remains (chance: up to {bound:.3g})"

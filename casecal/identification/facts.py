@@ -9,7 +9,6 @@ parameters could still gain.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,7 +49,9 @@ class Gathered:
     outliers: tuple[int, ...]
 
 
-def gather(make, robot, start, reference, names, out: Outcome, settings, e0: float) -> Gathered:
+def gather(
+    make, robot, start, reference, names, out: Outcome, settings, e0: float, e_before: float
+) -> Gathered:
     """Measure the `Facts` of a fit (module doc).
 
     Parameters
@@ -67,8 +68,8 @@ def gather(make, robot, start, reference, names, out: Outcome, settings, e0: flo
     out : Outcome
         Where the rounds ended.
     settings : casecal.identification.rounds.Settings
-    e0 : float
-        RMS error at the start, m.
+    e0, e_before : float
+        RMS error at the start and of `reference`, m.
     """
     robust = settings.loss != "linear"
     outside = _outside(robot, names)
@@ -94,10 +95,20 @@ def gather(make, robot, start, reference, names, out: Outcome, settings, e0: flo
     outliers = outlier_poses(make(out.robot, names=names), settings.w, settings.known)
     inliers = _inliers(make(out.robot, names=out.estimated), outliers) if robust else None
     unasked = outside_gain(final.restricted([*out.estimated, *outside]), out.estimated)
-    keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
+    keep_poses = np.setdiff1d(np.arange(len(q)), outliers)
+    keep = keep_poses if robust else slice(None)
     n_prior = int(np.sum(prior_w > 0))
     workspace = predicted_rms(out.robot, reference, out.estimated, cov)
-    smooth = None if settings.known or robust else lack_of_fit(est, robot.joint_types)
+    # the one-shot method's leftovers are its linearisation's, which "converged" judges
+    smooth = (
+        None
+        if settings.known or settings.method == "svd"
+        else lack_of_fit(
+            make(out.robot, names=out.estimated),
+            robot.joint_types,
+            keep_poses if robust else None,  # a robust fit judged on its inliers, unweighted
+        )
+    )
     facts = Facts(
         solver_status=out.solver_status,
         solver_message=out.message,
@@ -108,7 +119,7 @@ def gather(make, robot, start, reference, names, out: Outcome, settings, e0: flo
         known=settings.known,
         dof=(inliers[1] if inliers else linear.rows - len(out.estimated)) + n_prior,
         rms_start=e0,
-        rms_before=point_rms(make(reference, names=names).point_residuals(np.zeros(len(names)))),
+        rms_before=e_before,
         rms_final=point_rms(point_residuals),
         settled=out.settled,
         rounds=out.rounds,
@@ -146,7 +157,7 @@ def gather(make, robot, start, reference, names, out: Outcome, settings, e0: flo
         n_prior=n_prior,
         bounds=None if not settings.bounds else tuple(active),
         bound_gain=fit.solve()[1] - decrease if active else 0.0,
-        lack_of_fit=None if smooth is None else dataclasses.astuple(smooth),
+        lack_of_fit=smooth,
     )
     return Gathered(facts, cov, est, final, outliers)
 

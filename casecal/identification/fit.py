@@ -194,9 +194,15 @@ def identify(
     )
     reference = frames_fitted(make, start, names, settings, e0)
     before = make(reference, names=names).point_residuals(np.zeros(len(names)))
+    if method != "svd" and not bounds and not prior and reference is not start:
+        # the frames already fitted are a start a few iterations nearer the minimum; the
+        # one-shot method linearises at nominal as the paper does, and bounds and priors
+        # are taken from the start values
+        start = reference
+        e0 = point_rms(before)
     out = fit_in_rounds(make, start, names, settings, point_rms(before))
 
-    got = gather(make, robot, start, reference, names, out, settings, e0)
+    got = gather(make, robot, start, reference, names, out, settings, e0, point_rms(before))
     est, x0 = got.estimated, np.zeros(len(out.estimated))
     point_residuals = est.point_residuals(x0)
     checks = audit(got.facts)

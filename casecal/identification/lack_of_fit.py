@@ -40,7 +40,8 @@ class LackOfFit:
     n_extra : int
         Independent directions the basis adds: the degrees of freedom of the gain.
     cost, dof : float, int
-        ``0.5 Σ r²`` and residual degrees of freedom of the looked-at poses.
+        ``0.5 Σ r²`` less what the estimates' own step would remove, and the residual
+        degrees of freedom, of the position rows of the looked-at poses.
     """
 
     gain: float
@@ -69,27 +70,36 @@ def joint_functions(q: np.ndarray, joint_types: str) -> list[tuple[int, np.ndarr
     return out
 
 
-def lack_of_fit(problem: Problem, joint_types: str, seed: int = 0) -> LackOfFit | None:
+def lack_of_fit(problem: Problem, joint_types: str, poses=None, seed: int = 0) -> LackOfFit | None:
     """`LackOfFit` of `problem` (the estimated parameters at the fitted robot).
+
+    Only the position rows are judged: without a σ, orientation rows carry an arbitrary
+    weight (1 mrad like 0.1 mm), and pooling two noise scales in one F test raises false
+    alarms where orientations are noisier than that and hides model errors where they are
+    not.
+
+    Parameters
+    ----------
+    problem : Problem
+    joint_types : str
+    poses : array of int, optional
+        The poses to judge (a robust fit's inliers); default all, at most `MOST_POSES`
+        of them (a fixed random subset, `seed`).
 
     Returns None when too few rows are left to judge by (fewer than twice the basis's
     columns past the parameters').
     """
-    n = problem.q.shape[0]
-    if n > MOST_POSES:
-        keep = np.sort(np.random.default_rng(seed).choice(n, MOST_POSES, replace=False))
+    poses = np.arange(problem.q.shape[0]) if poses is None else np.asarray(poses)
+    if len(poses) > MOST_POSES:
+        poses = np.sort(np.random.default_rng(seed).choice(poses, MOST_POSES, replace=False))
+    if len(poses) < problem.q.shape[0]:
         problem = Problem(
-            problem.robot,
-            problem.q[keep],
-            problem.y[keep],
-            problem.w[keep],
-            problem.names,
-            orientations=None if problem.R is None else problem.R[keep],
-            w_rot=problem.w_rot,
+            problem.robot, problem.q[poses], problem.y[poses], problem.w[poses], problem.names
         )
     x0 = np.zeros(len(problem.names))
-    J = problem.jacobian(x0)
-    r = problem.residual(x0)
+    n, rows, points = len(problem.q), problem.w_rows.shape[1], 3 * problem.m
+    J = problem.jacobian(x0).reshape(n, rows, -1)[:, :points].reshape(n * points, -1)
+    r = problem.residual(x0).reshape(n, rows)[:, :points].ravel()
     X = _columns(problem, joint_types)
     inside, rank_in = _explained(J, r)
     both, rank_both = _explained(np.hstack([J, X]), r)
@@ -97,7 +107,8 @@ def lack_of_fit(problem: Problem, joint_types: str, seed: int = 0) -> LackOfFit 
     dof = r.size - rank_both
     if n_extra <= 0 or dof < 2 * n_extra:
         return None
-    cost = 0.5 * float(r @ r) - 0.5 * inside  # what the estimates' own step leaves
+    # what the estimates' own (linearised) step leaves: the fit's cost, to rounding
+    cost = 0.5 * float(r @ r) - 0.5 * inside
     return LackOfFit(max(0.5 * (both - inside), 0.0), n_extra, cost, r.size - rank_in)
 
 
@@ -113,10 +124,10 @@ def _explained(A: np.ndarray, r: np.ndarray) -> tuple[float, int]:
 
 def _columns(problem: Problem, joint_types: str, h: float = 1e-6) -> np.ndarray:
     """The weighted effect on the measured points of each joint error of
-    `joint_functions`, shape (N · rows per pose, B); orientation rows left at 0."""
+    `joint_functions`, shape (N · 3m, B)."""
     q, robot = problem.q, problem.robot
-    n, rows, dof = len(q), problem.w_rows.shape[1], len(joint_types)
-    moved = np.empty((n, 3 * problem.m, dof))
+    n, dof, points = len(q), len(joint_types), 3 * problem.m
+    moved = np.empty((n, points, dof))
     for j in range(dof):  # ∂(measured points)/∂q_j by central differences
         step = np.zeros(q.shape[1])
         step[j] = h
@@ -124,7 +135,5 @@ def _columns(problem: Problem, joint_types: str, h: float = 1e-6) -> np.ndarray:
         minus = robot.measured_points(q - step).reshape(n, -1)
         moved[:, :, j] = (plus - minus) / (2 * h)
     functions = joint_functions(q[:, :dof], joint_types)
-    X = np.zeros((n, rows, len(functions)))
-    for c, (j, values) in enumerate(functions):
-        X[:, : 3 * problem.m, c] = moved[:, :, j] * values[:, None]
-    return (X * problem.w_rows[:, :, None]).reshape(n * rows, -1)
+    X = np.stack([moved[:, :, j] * values[:, None] for j, values in functions], axis=2)
+    return (X * problem.w_rows[:, :points, None]).reshape(n * points, -1)

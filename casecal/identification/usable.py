@@ -13,6 +13,13 @@ from __future__ import annotations
 
 from .calibration import Calibration
 from .fit import identify
+from .rank import UNPRUNED_PREFIXES
+
+
+def held_as_poorly_determined(cal: Calibration) -> tuple[str, ...]:
+    """The estimates of `cal` that are poorly determined and may be held at nominal: not
+    the frames (base, reflectors), whose nominal is no value at all."""
+    return tuple(n for n in cal.poorly_determined if not n.startswith(UNPRUNED_PREFIXES))
 
 
 def hold_poorly_determined(cal: Calibration, measurements, **options) -> Calibration:
@@ -33,10 +40,11 @@ def hold_poorly_determined(cal: Calibration, measurements, **options) -> Calibra
         `parameters` leave the held ones out). A refit that fails its audit is returned
         as it is: the data needed what was held.
     """
+    asked = len(cal.parameters)
     held: list[str] = []
-    # holding some can leave others poorly determined in turn: at most one pass each
-    while cal.poorly_determined and cal.success and len(held) < len(cal.parameters):
-        held += cal.poorly_determined
+    # holding some can leave others poorly determined in turn: a pass for each at most
+    while held_as_poorly_determined(cal) and cal.success and len(held) < asked:
+        held += held_as_poorly_determined(cal)
         names = [n for n in cal.parameters if n not in held]
         cal = identify(cal.nominal, measurements, names, cal.method, **options)
     return cal
