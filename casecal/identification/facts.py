@@ -95,8 +95,7 @@ def gather(
     outliers = outlier_poses(make(out.robot, names=names), settings.w, settings.known)
     inliers = _inliers(make(out.robot, names=out.estimated), outliers) if robust else None
     unasked = outside_gain(final.restricted([*out.estimated, *outside]), out.estimated)
-    keep_poses = np.setdiff1d(np.arange(len(q)), outliers)
-    keep = keep_poses if robust else slice(None)
+    keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
     n_prior = int(np.sum(prior_w > 0))
     workspace = predicted_rms(out.robot, reference, out.estimated, cov)
     # the one-shot method's leftovers are its linearisation's, which "converged" judges
@@ -106,7 +105,7 @@ def gather(
         else lack_of_fit(
             make(out.robot, names=out.estimated),
             robot.joint_types,
-            keep_poses if robust else None,  # a robust fit judged on its inliers, unweighted
+            keep if robust else None,  # a robust fit judged on its inliers, unweighted
         )
     )
     facts = Facts(

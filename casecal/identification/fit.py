@@ -193,16 +193,20 @@ def identify(
         method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior, progress
     )
     reference = frames_fitted(make, start, names, settings, e0)
-    before = make(reference, names=names).point_residuals(np.zeros(len(names)))
+    e_before = point_rms(make(reference, names=names).point_residuals(np.zeros(len(names))))
     if method != "svd" and not bounds and not prior and reference is not start:
-        # the frames already fitted are a start a few iterations nearer the minimum; the
-        # one-shot method linearises at nominal as the paper does, and bounds and priors
-        # are taken from the start values
-        start = reference
-        e0 = point_rms(before)
-    out = fit_in_rounds(make, start, names, settings, point_rms(before))
+        # the fitted base is a start nearer the minimum. Not the tool or the reflectors:
+        # moved off the nominal, a tool point on the flange axis would make wrist
+        # parameters look visible, and what is fitted of them there stays behind, frozen,
+        # when they turn out blind. The one-shot method linearises at nominal as the
+        # paper does; bounds and priors are taken from the start values
+        start = start.with_parameters(
+            {n: reference.parameters[n] for n in names if n.startswith("base_")}
+        )
+        e0 = point_rms(make(start, names=names).point_residuals(np.zeros(len(names))))
+    out = fit_in_rounds(make, start, names, settings, e_before)
 
-    got = gather(make, robot, start, reference, names, out, settings, e0, point_rms(before))
+    got = gather(make, robot, start, reference, names, out, settings, e0, e_before)
     est, x0 = got.estimated, np.zeros(len(out.estimated))
     point_residuals = est.point_residuals(x0)
     checks = audit(got.facts)
@@ -223,7 +227,9 @@ def identify(
         standard_errors=se,
         covariance=cov,
         residuals=frame.vectors_out(point_residuals).reshape(-1, 3),
-        residuals_before=frame.vectors_out(before).reshape(-1, 3),
+        residuals_before=frame.vectors_out(
+            make(reference, names=names).point_residuals(np.zeros(len(names)))
+        ).reshape(-1, 3),
         orientation_residuals=frame.vectors_out(est.orientation_residuals(x0)),
         outliers=got.outliers,
         loss=loss

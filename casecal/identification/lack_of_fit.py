@@ -98,7 +98,9 @@ def lack_of_fit(problem: Problem, joint_types: str, poses=None, seed: int = 0) -
         )
     x0 = np.zeros(len(problem.names))
     n, rows, points = len(problem.q), problem.w_rows.shape[1], 3 * problem.m
-    J = problem.jacobian(x0).reshape(n, rows, -1)[:, :points].reshape(n * points, -1)
+    J = np.zeros((n * points, 0))
+    if problem.names:
+        J = problem.jacobian(x0).reshape(n, rows, -1)[:, :points].reshape(n * points, -1)
     r = problem.residual(x0).reshape(n, rows)[:, :points].ravel()
     X = _columns(problem, joint_types)
     inside, rank_in = _explained(J, r)
@@ -116,6 +118,8 @@ def _explained(A: np.ndarray, r: np.ndarray) -> tuple[float, int]:
     """|P_A r|² and the rank of A (columns scaled to unit norm first)."""
     norms = np.linalg.norm(A, axis=0)
     A = A[:, norms > 0] / norms[norms > 0]
+    if A.shape[1] == 0:
+        return 0.0, 0
     U, s, _ = np.linalg.svd(A, full_matrices=False)
     rank = int(np.sum(s > s[0] * 1e-9)) if s.size else 0
     c = U[:, :rank].T @ r
