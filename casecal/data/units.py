@@ -1,0 +1,410 @@
+"""Units checked at the door: measured points and joint values against the nominal robot.
+
+A unit slip (metres in ``x_mm`` columns, inches, radians in ``q*_deg`` columns) does not
+make data noisy: it makes them the measurements of another robot, often one the fit can
+reach exactly (a PUMA 560 with every length shrunk 1000 times fits metres written as
+millimetres to the rounding floor). So before any fit the data are compared with what the
+nominal robot does at the same joint values:
+
+- **positions**: the measured cloud against the nominal robot's cloud of measured points,
+  by a similarity fit (rotation, translation and one scale, so that wherever the
+  instrument stands does not matter). A cloud that is a faithful copy of the nominal one
+  (relative residual ≤ `SHAPE`) at a scale far from 1 (beyond `SCALE_REFUSED`) is a unit
+  slip, and refused, unless the nominal cloud is mostly a rotation about one point (only
+  the wrist moved): then a tool the model does not know could change its size, and the
+  finding is a warning;
+- **joints**: revolute values that all lie within ±π in the declared unit degrees (or
+  beyond two turns in radians) are read the other way too; when the measured points fit
+  the robot only in the other reading, the joint unit is refused.
+
+A finding that is possible but not certain is a `CalibrationWarning`; the fit's own check
+(`casecal.identification.scale`) then fails a calibrated robot that changed size.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CalibrationError, CalibrationWarning
+from ..model.robot import Robot
+
+SHAPE = 0.2
+"""Largest RMS residual of the similarity fit, relative to the measured cloud's RMS
+spread, at which the measured cloud counts as a scaled copy of the nominal one (a real
+robot's deviations leave a few per cent; a different pose set or robot, most of it)."""
+
+SCALE_REFUSED = 3.0
+"""A scaled copy of the nominal cloud more than this many times larger or smaller is a
+unit slip: no deviation of a real robot, only a tool the model lacks, changes its size so."""
+
+ROTATION_ONLY = 0.5
+"""Relative residual below which the nominal cloud is mostly a rotation about one point
+(a rotating offset explains it): an unmodelled tool could then change its size."""
+
+MIN_POINTS = 6
+"""Fewer measured points than this cannot tell a shape from a scale (two fit any scale)."""
+
+DOOR_POSES = 3000
+"""At most this many poses, evenly spread over the file, are compared at the door."""
+
+FACTOR_TOLERANCE = 1.15
+"""A ratio within this factor of a known slip is named as that slip."""
+
+_LENGTHS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "cm": 1e-2, "in": 0.0254, "km": 1e3}
+_LENGTH_WORDS = {
+    "m": "metres",
+    "mm": "millimetres",
+    "um": "micrometres",
+    "cm": "centimetres",
+    "in": "inches",
+    "km": "kilometres",
+}
+
+
+@dataclass(frozen=True)
+class Similarity:
+    """``measured ≈ scale · R · nominal + t``, with spreads and residual in m (RMS)."""
+
+    scale: float
+    residual: float
+    spread_nominal: float
+    spread_measured: float
+
+    @property
+    def shape_error(self) -> float:
+        """RMS residual relative to the measured cloud's RMS spread (0: a perfect copy)."""
+        return self.residual / self.spread_measured if self.spread_measured > 0 else math.inf
+
+
+def similarity(nominal: np.ndarray, measured: np.ndarray) -> Similarity:
+    """Umeyama's least-squares similarity fit of point clouds.
+
+    Parameters
+    ----------
+    nominal, measured : ndarray, shape (K, 3)
+        Corresponding points, m.
+
+    Returns
+    -------
+    Similarity
+        Scale, RMS residual (m) and the RMS distances of each cloud from its centroid (m).
+    """
+    a = nominal - nominal.mean(axis=0)
+    b = measured - measured.mean(axis=0)
+    var_a = float(np.mean(np.sum(a * a, axis=1)))
+    var_b = float(np.mean(np.sum(b * b, axis=1)))
+    if var_a <= 0:
+        return Similarity(math.nan, math.sqrt(var_b), 0.0, math.sqrt(var_b))
+    U, S, Vt = np.linalg.svd(b.T @ a / len(a))
+    d = np.ones(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        d[2] = -1.0
+    scale = float(np.sum(S * d) / var_a)
+    residual2 = var_b - float(np.sum(S * d)) ** 2 / var_a
+    return Similarity(scale, math.sqrt(max(residual2, 0.0)), math.sqrt(var_a), math.sqrt(var_b))
+
+
+def rigid_rms(nominal: np.ndarray, measured: np.ndarray) -> float:
+    """RMS residual (m) of the best rotation and translation of `nominal` onto `measured`."""
+    a = nominal - nominal.mean(axis=0)
+    b = measured - measured.mean(axis=0)
+    U, S, Vt = np.linalg.svd(b.T @ a)
+    d = np.ones(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        d[2] = -1.0
+    r2 = np.sum(a * a) + np.sum(b * b) - 2 * np.sum(S * d)
+    return math.sqrt(max(float(r2), 0.0) / len(a))
+
+
+def ratio_text(ratio: float) -> str:
+    """``"1/1000 (0.001×) of"`` or ``"1000 times"`` for a spread ratio, to go before
+    "what the robot reaches"."""
+    if ratio < 1:
+        inverse = 1 / ratio
+        shown = f"{inverse:.4g}" if inverse < 100 else f"{inverse:.0f}"
+        return f"1/{shown} ({ratio:.3g}×) of"
+    return f"{ratio:.4g} times"
+
+
+def length_unit_slip(ratio: float, declared: str = "m") -> str | None:
+    """The unit the values are really in, if `ratio` (read over true size) is a known slip.
+
+    Values read in `declared` ("m", "mm", "um") come out `ratio` times their true size
+    when they really are in the returned unit ("m", "mm", "um", "cm", "in", "km").
+    """
+    s_declared = _LENGTHS[declared]
+    for unit, s in _LENGTHS.items():
+        if unit != declared and abs(math.log(s_declared / s / ratio)) < math.log(FACTOR_TOLERANCE):
+            return unit
+    return None
+
+
+def api_unit_words(unit: str) -> str:
+    """What values given as metres but really in `unit` are, in words."""
+    if unit == "km":  # nobody measures robots in km: metres divided by 1000 once too often
+        return "metres divided by 1000 (taken for millimetres)"
+    return f"in {_LENGTH_WORDS[unit]}"
+
+
+@dataclass(frozen=True)
+class PositionFinding:
+    """The measured cloud against the nominal robot's (module doc)."""
+
+    ratio: float
+    """Scale of the similarity fit of the nominal cloud onto the measured one."""
+    shape_error: float
+    rotation_only: bool
+    refused: bool
+
+
+@dataclass(frozen=True)
+class JointFinding:
+    """The joint values read in another unit fit the measured points (module doc)."""
+
+    factor: float
+    """What the values were multiplied by in the other reading (180/π or π/180)."""
+    rms_declared: float
+    rms_other: float
+    largest: float
+    """Largest |value| of the joints read the other way, in the declared unit (rad)."""
+    refused: bool
+
+
+def _nominal_points(robot: Robot, q: np.ndarray, m: int) -> np.ndarray | None:
+    try:
+        P = robot.measured_points(q)
+    except (CalibrationError, ValueError):
+        return None
+    if P.shape[1] != m:
+        P = np.repeat(P[:, :1], m, axis=1)  # reflectors not on the model: all at its tool
+    return P
+
+
+def _rotation_only(robot: Robot, q: np.ndarray, P: np.ndarray) -> bool:
+    """Whether a rotating offset (a tool the model does not know) explains most of the
+    nominal cloud: ``P_ij - mean ≈ (R_i - mean R) u_j`` for some u_j per point."""
+    try:
+        R = robot.fk(q)[:, :3, :3]
+    except ValueError:  # a robot fk does not serve: assume it might be
+        return True
+    if R.shape != (len(q), 3, 3):
+        return True
+    A = (R - R.mean(axis=0)).reshape(-1, 3)  # (3N, 3)
+    Pc = P - P.mean(axis=0)
+    total = float(np.sum(Pc * Pc))
+    if total <= 0:
+        return True
+    rhs = np.swapaxes(Pc, 0, 1).reshape(P.shape[1], -1).T  # (3N, m)
+    u, *_ = np.linalg.lstsq(A, rhs, rcond=None)
+    left = float(np.sum((rhs - A @ u) ** 2))
+    return math.sqrt(left / total) <= ROTATION_ONLY
+
+
+def check_positions(robot: Robot, q: np.ndarray, points: np.ndarray) -> PositionFinding | None:
+    """The measured cloud against the nominal robot's at the same joint values.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot.
+    q : ndarray, shape (N, dof) or (N, dof + inputs)
+        Joint values, SI.
+    points : ndarray, shape (N, m, 3)
+        Measured points, m (in any frame).
+
+    Returns
+    -------
+    PositionFinding or None
+        None when the clouds agree in size or cannot be compared (too few points, a
+        nominal cloud that does not move).
+    """
+    q, points = _subsample(q, points)
+    if points.shape[0] * points.shape[1] < MIN_POINTS:
+        return None
+    P = _nominal_points(robot, q, points.shape[1])
+    if P is None:
+        return None
+    fit = similarity(P.reshape(-1, 3), points.reshape(-1, 3))
+    if not fit.spread_nominal > 1e-6 or not fit.spread_measured > 0:
+        return None
+    ratio = fit.scale if fit.scale > 0 else fit.spread_measured / fit.spread_nominal
+    far = abs(math.log(ratio)) > math.log(SCALE_REFUSED)
+    copy = fit.shape_error <= SHAPE
+    named = length_unit_slip(ratio) is not None
+    if not far or not (copy or named):
+        return None
+    rotation_only = _rotation_only(robot, q, P)
+    refused = copy and not rotation_only
+    return PositionFinding(ratio, fit.shape_error, rotation_only, refused)
+
+
+def check_joints(
+    robot: Robot, q: np.ndarray, points: np.ndarray, joints=None
+) -> JointFinding | None:
+    """Revolute joint values read in the other angle unit, if the measured points fit the
+    robot only that way.
+
+    Values of the `joints` (0-based indices of revolute joints; default all revolute) are
+    tried as radians (× 180/π) when read so they stay within the joint limits (±π without
+    limits), as happens only to degrees of a few units; values beyond two turns in radians
+    are tried as degrees (× π/180), when they then stay within the limits.
+
+    Returns
+    -------
+    JointFinding or None
+        None when the declared reading is the only plausible one.
+    """
+    q, points = _subsample(q, points)
+    revolute = [i for i, j in enumerate(robot.joints) if j.type == "R"]
+    joints = revolute if joints is None else [i for i in joints if i in revolute]
+    if not joints or points.shape[0] < MIN_POINTS:
+        return None
+    values = q[:, joints]
+    largest = float(np.max(np.abs(values)))
+    if np.ptp(values, axis=0).max() <= 0:
+        return None
+    if largest > 2 * math.pi + 1e-9:
+        factor = math.pi / 180  # degrees given as radians
+    else:
+        factor = 180 / math.pi  # radians in degree columns, if they fit the limits so
+    other = q.copy()
+    other[:, joints] *= factor
+    for i in joints:
+        # the other reading must be a pose the robot can take (no limits: within ±π)
+        lo, hi = robot.joints[i].limits or (-math.pi, math.pi)
+        slack = math.radians(3)
+        if other[:, i].min() < lo - slack or other[:, i].max() > hi + slack:
+            return None
+    m = points.shape[1]
+    P, P_other = _nominal_points(robot, q, m), _nominal_points(robot, other, m)
+    if P is None or P_other is None:
+        return None
+    y = points.reshape(-1, 3)
+    spread = float(np.sqrt(np.mean(np.sum((y - y.mean(axis=0)) ** 2, axis=1))))
+    rms, rms_other = rigid_rms(P.reshape(-1, 3), y), rigid_rms(P_other.reshape(-1, 3), y)
+    if rms <= 0.5 * spread:
+        return None  # the declared reading fits: tiny motions in the declared unit
+    refused = rms_other <= 0.2 * rms
+    return JointFinding(factor, rms, rms_other, largest, refused)
+
+
+def _subsample(q: np.ndarray, points: np.ndarray):
+    q = np.asarray(q, dtype=float)
+    points = np.asarray(points, dtype=float).reshape(len(q), -1, 3)
+    if len(q) > DOOR_POSES:
+        index = np.linspace(0, len(q) - 1, DOOR_POSES).round().astype(int)
+        q, points = q[index], points[index]
+    return q, points
+
+
+def position_text(found: PositionFinding, columns: str | None = None, declared="m") -> str:
+    """What the position finding means, and the fix, for a CSV's `columns` (e.g.
+    ``"x_mm, y_mm, z_mm"`` read in `declared` units) or, without them, for `Measurements`
+    (metres)."""
+    unit = length_unit_slip(found.ratio, declared)
+    head = (
+        f"the measured points span {ratio_text(found.ratio)} what the robot reaches at "
+        "these joint values"
+    )
+    if columns is not None:
+        if unit is not None:
+            return (
+                f"{head}: are {columns} in {_LENGTH_WORDS[unit]}? Convert them to "
+                f"{_LENGTH_WORDS[declared]}, or name the columns for their unit "
+                "(x, y, z in m; x_mm, y_mm, z_mm; x_um, y_um, z_um)"
+            )
+        return (
+            f"{head}: check the unit of {columns} (and the robot file's length_unit), and "
+            "that the file belongs to this robot"
+        )
+    if unit is not None:
+        return (
+            f"{head}: are the positions {api_unit_words(unit)}? Measurements take metres "
+            "(in a CSV file: x, y, z in m or x_mm, y_mm, z_mm in mm)"
+        )
+    return (
+        f"{head}: check the unit of the positions (Measurements take metres; in a CSV file "
+        "x_mm, y_mm, z_mm columns take mm) and of the robot file's lengths"
+    )
+
+
+def joint_text(found: JointFinding, columns: str | None = None) -> str:
+    """What the joint finding means, and the fix (`columns`: the CSV's joint columns)."""
+    fit = (
+        f"the measured points fit the robot only with these values read as "
+        f"{'radians' if found.factor > 1 else 'degrees'} (rigid-fit RMS "
+        f"{found.rms_other * 1e3:.3g} mm, against {found.rms_declared * 1e3:.3g} mm as given)"
+    )
+    if found.factor > 1:
+        if columns is not None:
+            return (
+                f"{columns} hold degrees by their names, but every value lies within "
+                f"±{math.degrees(found.largest):.3g}, and {fit}: they look like radians; "
+                "convert them to degrees or rename them q1_rad, q2_rad, …"
+            )
+        return (
+            f"the revolute joint values all lie within ±{found.largest:.3g} rad "
+            f"(±{math.degrees(found.largest):.3g}°), and {fit}: were radians converted with "
+            "numpy.deg2rad as if they were degrees? Measurements take radians"
+        )
+    where = f"{columns} hold radians by their names, but" if columns else "the joint values"
+    return (
+        f"{where} reach {found.largest:.4g}, more than two turns in radians, and {fit}: they "
+        "look like degrees; Measurements take radians (numpy.deg2rad), a CSV file names "
+        "degree columns q1_deg, q2_deg, …"
+    )
+
+
+def at_the_door(
+    robot: Robot,
+    q: np.ndarray,
+    points: np.ndarray,
+    *,
+    label: str | None = None,
+    position_columns: str | None = None,
+    declared: str = "m",
+    joint_columns: str | None = None,
+    joints=None,
+) -> None:
+    """Refuse (`CalibrationError`) or warn (`CalibrationWarning`) about unit slips.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot.
+    q : ndarray, shape (N, dof)
+        Joint values, SI as read.
+    points : ndarray, shape (N, 3) or (N, m, 3)
+        Measured points, m as read.
+    label : str, optional
+        The file, to start messages with.
+    position_columns, declared : str, optional
+        The CSV's position columns (``"x_mm, y_mm, z_mm"``) and the unit they declare.
+    joint_columns : str, optional
+        The CSV's joint columns that `joints` (0-based) are read from, e.g. the ``_deg``
+        ones; without them, every revolute joint and wording for `Measurements`.
+    """
+    prefix = f"{label}: " if label else ""
+    found = check_joints(robot, q, points, joints)
+    if found is not None:
+        text = prefix + joint_text(found, joint_columns)
+        if found.refused:
+            raise CalibrationError(text)
+        warnings.warn(text, CalibrationWarning, stacklevel=3)
+        return
+    position = check_positions(robot, q, points)
+    if position is None:
+        return
+    text = prefix + position_text(position, position_columns, declared)
+    if position.refused:
+        raise CalibrationError(text)
+    if position.rotation_only:
+        text += (
+            " (not refused: the robot barely moves its measured point but by turning it, so "
+            "a tool the robot file does not have could explain the size)"
+        )
+    warnings.warn(text, CalibrationWarning, stacklevel=3)
