@@ -35,6 +35,16 @@ def puma():
     return robot, true, q, cc.simulate(true, q)
 
 
+@pytest.fixture(scope="module")
+def puma_seed():
+    """`casecal simulate puma560 --poses 120 --noise 0.01mm` (the default, the paper's
+    schedule: every joint at 0, 1, 2, … degrees together, one curve through the space)."""
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 2e-4, "d3": -1e-4, "theta2": 3e-4})
+    q = cc.poses.seed_schedule(robot, 120)
+    return robot, true, q, cc.simulate(true, q, noise=1e-5, seed=0)
+
+
 def _csv(tmp_path, robot, meas, change=None, name="m.csv"):
     """`meas` written as the CLI's CSV, with `change(df)` applied to the columns."""
     path = tmp_path / name
@@ -87,6 +97,29 @@ def test_radians_in_degree_columns_name_the_unit_not_max_iterations(tmp_path, ca
     assert code == 2 and not out.exists()
     assert "--max-iterations" not in err
     assert "q1_deg" in err and "radians" in err and "degrees" in err
+
+
+@pytest.mark.parametrize(
+    ("change", "words"),
+    [
+        (_divide_positions(1000), "x_mm, y_mm, z_mm in metres"),
+        (_degrees_as_radians, "look like radians"),
+    ],
+)
+def test_slips_in_the_default_schedule_refused_by_the_cli(
+    tmp_path, capsys, puma_seed, change, words
+):
+    """The lockstep schedule moves the tool along one curve, which a rotating tool
+    offset nearly explains; the door must still tell a 1000× smaller copy apart."""
+    robot, _, _, meas = puma_seed
+    csv = _csv(tmp_path, robot, meas, change)
+    out = tmp_path / "cal.toml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the schedule leaves joint 3's limits
+        code = main(["identify", "puma560", str(csv), "--parameters", "all", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists(), err
+    assert words in err and "--max-iterations" not in err
 
 
 def test_inches_in_mm_columns_refused(tmp_path, capsys, puma):
@@ -365,3 +398,23 @@ def test_degrees_in_rad_columns_refused(tmp_path, puma):
     csv = _csv(tmp_path, robot, meas, rename)
     with pytest.raises(cc.CalibrationError, match=r"'q\d_rad' \(radians\).*name it q\d_deg"):
         cc.read_csv(csv, robot)
+
+
+def test_similarity_recovers_a_known_scale_rotation_and_shift():
+    """The door's comparison against a transform made by hand (scipy's rotation)."""
+    from scipy.spatial.transform import Rotation
+
+    from casecal.data.clouds import rigid_rms, similarity
+
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(50, 3))
+    R = Rotation.from_rotvec([0.3, -1.2, 2.0]).as_matrix()
+    for scale in (1e-3, 1 / 25.4, 1.0, 1e3):
+        b = scale * a @ R.T + [4.0, -2.0, 7.0]
+        fit = similarity(a, b)
+        assert fit.scale == pytest.approx(scale, rel=1e-12)
+        assert fit.shape_error < 1e-9
+    b = a @ R.T + 0.01 * rng.normal(size=a.shape)
+    # the best rigid fit leaves about the noise: 0.01 per coordinate, 6 of 150 dof used
+    assert rigid_rms(a, b) == pytest.approx(0.01 * np.sqrt(3 * (1 - 6 / 150)), rel=0.2)
+    assert rigid_rms(a, a @ R.T * 2) > 0.5  # a rigid fit cannot rescale

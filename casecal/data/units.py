@@ -10,12 +10,15 @@ nominal robot does at the same joint values:
   by a similarity fit (rotation, translation and one scale, so that wherever the
   instrument stands does not matter). A cloud that is a faithful copy of the nominal one
   (relative residual ≤ `SHAPE`) at a scale far from 1 (beyond `SCALE_REFUSED`) is a unit
-  slip, and refused, unless the nominal cloud is mostly a rotation about one point (only
-  the wrist moved): then a tool the model does not know could change its size, and the
-  finding is a warning;
-- **joints**: revolute values that all lie within ±π in the declared unit degrees (or
-  beyond two turns in radians) are read the other way too; when the measured points fit
-  the robot only in the other reading, the joint unit is refused.
+  slip, and refused, unless the nominal cloud is so nearly a rotation about one point
+  (only the wrist moved) that a tool the model does not know could change its size
+  (`unmodelled_tool_possible`): then the finding is a warning;
+- **joints**: revolute values in degrees that read as radians stay within a turn (all
+  within ±6.3, as radians in ``q*_deg`` columns are), or radians beyond a turn, are read
+  the other way too; when the measured points fit the robot only in the other reading,
+  the joint unit is refused. Small motions in degrees (every joint within ±3° of zero)
+  fit the declared reading and pass. Values outside the joint limits stay a warning
+  (`casecal.data.files`): a robot file's limits may be conservative.
 
 A finding that is possible but not certain is a `CalibrationWarning`; the fit's own check
 (`casecal.identification.scale`) then fails a calibrated robot that changed size.
@@ -31,6 +34,7 @@ import numpy as np
 
 from ..errors import CalibrationError, CalibrationWarning
 from ..model.robot import Robot
+from .clouds import Similarity, rigid_rms, similarity  # noqa: F401 (re-export)
 
 SHAPE = 0.2
 """Largest RMS residual of the similarity fit, relative to the measured cloud's RMS
@@ -41,9 +45,9 @@ SCALE_REFUSED = 3.0
 """A scaled copy of the nominal cloud more than this many times larger or smaller is a
 unit slip: no deviation of a real robot, only a tool the model lacks, changes its size so."""
 
-ROTATION_ONLY = 0.5
-"""Relative residual below which the nominal cloud is mostly a rotation about one point
-(a rotating offset explains it): an unmodelled tool could then change its size."""
+TOOL_SLACK = 2.0
+"""How much more than `SHAPE` an unmodelled tool's leftover may be before it is excluded
+as the reason for a change of size (`unmodelled_tool_possible`)."""
 
 MIN_POINTS = 6
 """Fewer measured points than this cannot tell a shape from a scale (two fit any scale)."""
@@ -63,61 +67,6 @@ _LENGTH_WORDS = {
     "in": "inches",
     "km": "kilometres",
 }
-
-
-@dataclass(frozen=True)
-class Similarity:
-    """``measured ≈ scale · R · nominal + t``, with spreads and residual in m (RMS)."""
-
-    scale: float
-    residual: float
-    spread_nominal: float
-    spread_measured: float
-
-    @property
-    def shape_error(self) -> float:
-        """RMS residual relative to the measured cloud's RMS spread (0: a perfect copy)."""
-        return self.residual / self.spread_measured if self.spread_measured > 0 else math.inf
-
-
-def similarity(nominal: np.ndarray, measured: np.ndarray) -> Similarity:
-    """Umeyama's least-squares similarity fit of point clouds.
-
-    Parameters
-    ----------
-    nominal, measured : ndarray, shape (K, 3)
-        Corresponding points, m.
-
-    Returns
-    -------
-    Similarity
-        Scale, RMS residual (m) and the RMS distances of each cloud from its centroid (m).
-    """
-    a = nominal - nominal.mean(axis=0)
-    b = measured - measured.mean(axis=0)
-    var_a = float(np.mean(np.sum(a * a, axis=1)))
-    var_b = float(np.mean(np.sum(b * b, axis=1)))
-    if var_a <= 0:
-        return Similarity(math.nan, math.sqrt(var_b), 0.0, math.sqrt(var_b))
-    U, S, Vt = np.linalg.svd(b.T @ a / len(a))
-    d = np.ones(3)
-    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
-        d[2] = -1.0
-    scale = float(np.sum(S * d) / var_a)
-    residual2 = var_b - float(np.sum(S * d)) ** 2 / var_a
-    return Similarity(scale, math.sqrt(max(residual2, 0.0)), math.sqrt(var_a), math.sqrt(var_b))
-
-
-def rigid_rms(nominal: np.ndarray, measured: np.ndarray) -> float:
-    """RMS residual (m) of the best rotation and translation of `nominal` onto `measured`."""
-    a = nominal - nominal.mean(axis=0)
-    b = measured - measured.mean(axis=0)
-    U, S, Vt = np.linalg.svd(b.T @ a)
-    d = np.ones(3)
-    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
-        d[2] = -1.0
-    r2 = np.sum(a * a) + np.sum(b * b) - 2 * np.sum(S * d)
-    return math.sqrt(max(float(r2), 0.0) / len(a))
 
 
 def ratio_text(ratio: float) -> str:
@@ -157,7 +106,9 @@ class PositionFinding:
     ratio: float
     """Scale of the similarity fit of the nominal cloud onto the measured one."""
     shape_error: float
-    rotation_only: bool
+    tool_could_explain: bool
+    """The nominal cloud is so nearly a rotation about one point (only the wrist turned)
+    that a tool the robot file lacks could explain the size (`unmodelled_tool_possible`)."""
     refused: bool
 
 
@@ -184,24 +135,37 @@ def _nominal_points(robot: Robot, q: np.ndarray, m: int) -> np.ndarray | None:
     return P
 
 
-def _rotation_only(robot: Robot, q: np.ndarray, P: np.ndarray) -> bool:
-    """Whether a rotating offset (a tool the model does not know) explains most of the
-    nominal cloud: ``P_ij - mean ≈ (R_i - mean R) u_j`` for some u_j per point."""
+def rotating_residual(robot: Robot, q: np.ndarray, P: np.ndarray) -> float:
+    """How far the nominal cloud is from a rotation about one point: the relative RMS
+    residual of ``P_ij - mean ≈ (R_i - mean R) u_j`` (a rotating offset u_j per point,
+    R_i the tool's rotation); 0 when only the wrist turned about a fixed point, 0 also
+    when the robot's rotations cannot be had (then nothing is excluded)."""
     try:
         R = robot.fk(q)[:, :3, :3]
-    except ValueError:  # a robot fk does not serve: assume it might be
-        return True
+    except ValueError:  # a robot fk does not serve
+        return 0.0
     if R.shape != (len(q), 3, 3):
-        return True
+        return 0.0
     A = (R - R.mean(axis=0)).reshape(-1, 3)  # (3N, 3)
     Pc = P - P.mean(axis=0)
     total = float(np.sum(Pc * Pc))
     if total <= 0:
-        return True
+        return 0.0
     rhs = np.swapaxes(Pc, 0, 1).reshape(P.shape[1], -1).T  # (3N, m)
     u, *_ = np.linalg.lstsq(A, rhs, rcond=None)
-    left = float(np.sum((rhs - A @ u) ** 2))
-    return math.sqrt(left / total) <= ROTATION_ONLY
+    return math.sqrt(float(np.sum((rhs - A @ u) ** 2)) / total)
+
+
+def unmodelled_tool_possible(ratio: float, rotating: float) -> bool:
+    """Whether a tool the robot file lacks could make the measured cloud `ratio` times
+    the nominal one's size.
+
+    Such a tool adds ``(R_i - mean R) t`` to the nominal points; matching ``ratio · P``
+    needs ``(1 - ratio) P ≈ (R_i - mean R) t``, which leaves at least `rotating` ·
+    |1 - ratio| of the nominal spread over, against a measured spread of `ratio` times
+    it: possible only while that is within `TOOL_SLACK` · `SHAPE` of the measured spread.
+    """
+    return rotating * abs(1 - ratio) <= TOOL_SLACK * SHAPE * ratio
 
 
 def check_positions(robot: Robot, q: np.ndarray, points: np.ndarray) -> PositionFinding | None:
@@ -237,9 +201,9 @@ def check_positions(robot: Robot, q: np.ndarray, points: np.ndarray) -> Position
     named = length_unit_slip(ratio) is not None
     if not far or not (copy or named):
         return None
-    rotation_only = _rotation_only(robot, q, P)
-    refused = copy and not rotation_only
-    return PositionFinding(ratio, fit.shape_error, rotation_only, refused)
+    tool_could_explain = unmodelled_tool_possible(ratio, rotating_residual(robot, q, P))
+    refused = copy and not tool_could_explain
+    return PositionFinding(ratio, fit.shape_error, tool_could_explain, refused)
 
 
 def check_joints(
@@ -249,9 +213,10 @@ def check_joints(
     robot only that way.
 
     Values of the `joints` (0-based indices of revolute joints; default all revolute) are
-    tried as radians (× 180/π) when read so they stay within the joint limits (±π without
-    limits), as happens only to degrees of a few units; values beyond two turns in radians
-    are tried as degrees (× π/180), when they then stay within the limits.
+    tried as radians (× 180/π) when read so they stay within a turn either way, as happens
+    only to degrees of a few units; values beyond a turn either way in radians are tried
+    as degrees (× π/180). The declared reading is kept whenever it fits the measured
+    points; the other one is refused only when it fits them and the declared one does not.
 
     Returns
     -------
@@ -270,15 +235,12 @@ def check_joints(
     if largest > 2 * math.pi + 1e-9:
         factor = math.pi / 180  # degrees given as radians
     else:
-        factor = 180 / math.pi  # radians in degree columns, if they fit the limits so
+        factor = 180 / math.pi  # radians in degree columns
     other = q.copy()
     other[:, joints] *= factor
-    for i in joints:
-        # the other reading must be a pose the robot can take (no limits: within ±π)
-        lo, hi = robot.joints[i].limits or (-math.pi, math.pi)
-        slack = math.radians(3)
-        if other[:, i].min() < lo - slack or other[:, i].max() > hi + slack:
-            return None
+    # the other reading must be an angle a joint turns to (the fit below decides)
+    if np.abs(other[:, joints]).max() > 2 * math.pi + 1e-9:
+        return None
     m = points.shape[1]
     P, P_other = _nominal_points(robot, q, m), _nominal_points(robot, other, m)
     if P is None or P_other is None:
@@ -402,9 +364,9 @@ def at_the_door(
     text = prefix + position_text(position, position_columns, declared)
     if position.refused:
         raise CalibrationError(text)
-    if position.rotation_only:
+    if position.tool_could_explain:
         text += (
-            " (not refused: the robot barely moves its measured point but by turning it, so "
+            " (not refused: at these poses the robot's point only turns about one point, so "
             "a tool the robot file does not have could explain the size)"
         )
     warnings.warn(text, CalibrationWarning, stacklevel=3)
