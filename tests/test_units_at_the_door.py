@@ -418,3 +418,47 @@ def test_similarity_recovers_a_known_scale_rotation_and_shift():
     # the best rigid fit leaves about the noise: 0.01 per coordinate, 6 of 150 dof used
     assert rigid_rms(a, b) == pytest.approx(0.01 * np.sqrt(3 * (1 - 6 / 150)), rel=0.2)
     assert rigid_rms(a, a @ R.T * 2) > 0.5  # a rigid fit cannot rescale
+
+
+# ---- distances between poses (ball bar): the same door -------------------------------------
+
+
+@pytest.fixture(scope="module")
+def ball_bar():
+    from casecal.identification.distances import random_pairs, simulate_distances
+
+    robot = cc.load_robot("puma560")
+    true = robot.with_deviations({"a2": 2e-4, "d3": -1e-4})
+    q = cc.poses.uniform(robot, 80, seed=0)
+    return robot, simulate_distances(true, q, random_pairs(80, 300, seed=1))
+
+
+def test_distances_in_inches_refused_through_the_cli(tmp_path, capsys, ball_bar):
+    """Before: 'converged: residuals are at the rounding floor', exit 0, a robot 25.4
+    times smaller written."""
+    from casecal.identification.distances import write_distance_csv
+
+    robot, meas = ball_bar
+    poses = cc.Measurements(meas.q, np.zeros((len(meas.q), 3)), 0.0)
+    cc.write_csv(tmp_path / "poses.csv", poses, robot)
+    write_distance_csv(tmp_path / "pairs.csv", meas)
+    df = pd.read_csv(tmp_path / "pairs.csv")
+    df["distance_mm"] = df["distance_mm"] / 25.4
+    df.to_csv(tmp_path / "pairs.csv", index=False, float_format="%.17g")
+    out = tmp_path / "cal.toml"
+    argv = ["identify", "puma560", str(tmp_path / "poses.csv"), "--pairs"]
+    code = main([*argv, str(tmp_path / "pairs.csv"), "--parameters", "all", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists(), err
+    assert "distance_mm values in inches" in err
+
+
+@pytest.mark.parametrize(("factor", "words"), [(1e-3, "in metres"), (1e3, "micrometres")])
+def test_distances_in_another_unit_refused(ball_bar, factor, words):
+    from casecal.identification.distances import DistanceMeasurements, identify_distances
+
+    robot, meas = ball_bar
+    assert identify_distances(robot, meas, "all").success
+    slipped = DistanceMeasurements(meas.q, meas.pairs, meas.distances * factor, 0.0)
+    with pytest.raises(cc.CalibrationError, match=words):
+        identify_distances(robot, slipped, "all")

@@ -370,3 +370,48 @@ def at_the_door(
             "a tool the robot file does not have could explain the size)"
         )
     warnings.warn(text, CalibrationWarning, stacklevel=3)
+
+
+def distances_at_the_door(robot: Robot, q: np.ndarray, pairs: np.ndarray, distances) -> None:
+    """Refuse distances (m) that are a scaled copy of the nominal robot's (1/1000: metres in
+    a ``distance_mm`` column; 1/25.4: inches), as `at_the_door` does for points.
+
+    Parameters
+    ----------
+    robot : Robot
+    q : ndarray, shape (N, dof)
+        Poses, SI.
+    pairs : ndarray of int, shape (P, 2)
+    distances : ndarray, shape (P,)
+        Measured distances, m.
+    """
+    d = np.asarray(distances, dtype=float)
+    P = _nominal_points(robot, q, 1)
+    if P is None or len(d) < MIN_POINTS:
+        return
+    nominal = np.linalg.norm(P[pairs[:, 0], 0] - P[pairs[:, 1], 0], axis=1)
+    scale2 = float(nominal @ nominal)
+    if scale2 <= 0 or not np.any(d > 0):
+        return
+    ratio = float(d @ nominal) / scale2
+    if not ratio > 0 or abs(math.log(ratio)) <= math.log(SCALE_REFUSED):
+        return
+    shape = float(np.linalg.norm(d - ratio * nominal) / np.linalg.norm(d))
+    if shape > SHAPE:
+        return
+    head = (
+        f"the measured distances are {ratio_text(ratio)} the nominal robot's between the same poses"
+    ).replace(" of the", " the")
+    in_file, in_code = length_unit_slip(ratio, "mm"), length_unit_slip(ratio, "m")
+    text = (
+        f"{head}: are the distance_mm values in {_LENGTH_WORDS[in_file]}?"
+        if in_file is not None
+        else f"{head}: check the unit of the distance_mm values (mm) and the robot file's"
+    )
+    text += " (DistanceMeasurements built in code take metres" + (
+        f": are they {api_unit_words(in_code)}?)" if in_code is not None else ")"
+    )
+    if unmodelled_tool_possible(ratio, rotating_residual(robot, q, P)):
+        warnings.warn(text, CalibrationWarning, stacklevel=3)
+        return
+    raise CalibrationError(text)
