@@ -438,7 +438,7 @@ def _show_urdf(robot, deg: float, mm: float) -> None:
 
 def robot_for(args: argparse.Namespace, name: str):
     """`load_robot(name)`, with --base-link and --tip-link for a URDF file."""
-    if str(name).endswith((".urdf", ".xacro")):
+    if str(name).lower().endswith((".urdf", ".xacro")):
         ends = {k: getattr(args, k, None) for k in ("base_link", "tip_link")}
         return load_robot(name, **ends)
     return load_robot(name)

@@ -29,6 +29,7 @@ from ..model.frames import matrix_from_quaternion, quaternion_from_matrix
 from ..model.robot import Robot
 from ..textio import read_text, write_atomic, write_together  # noqa: F401 (re-export)
 from .measurements import Measurements
+from .units import at_the_door
 
 _SCALE = {"": 1.0, "m": 1.0, "mm": 1e-3, "um": 1e-6, "rad": 1.0, "deg": math.pi / 180.0}
 _JOINT = re.compile(r"^q(\d+)(?:_(deg|rad|mm|m))?$")
@@ -56,6 +57,7 @@ def read_csv(path, robot: Robot) -> Measurements:
     y = _positions(df, columns, label)
     if not any(re.fullmatch(r"(p\d+_)?[xyz]_(mm|m|um)", c) for c in columns):
         _check_metres(y, robot, label)
+    _check_units(df, robot, q, y, label)
     orientations = _orientations(df, columns, label)
     sigma = np.zeros((len(df), 3))
     if any(c in df for c in ("sigma", "sigma_m", "sigma_mm", "sigma_um")):
@@ -128,6 +130,37 @@ def _check_metres(y: np.ndarray, robot: Robot, label: str) -> None:
             f"metres, but {robot.name!r} reaches at most {reach:.3g} m from its base: they "
             "look like millimetres; name the columns x_mm, y_mm, z_mm (or p1_x_mm, …)"
         )
+
+
+def _check_units(df: pd.DataFrame, robot: Robot, q: np.ndarray, y: np.ndarray, label: str):
+    """The door check of `casecal.data.units`, worded with this file's column names."""
+    names = [c for c in df.columns if _POINT.match(c) or re.fullmatch(r"[xyz](_(mm|m|um))?", c)]
+    unit = re.fullmatch(r"(?:p\d+_)?[xyz](?:_(mm|m|um))?", names[0]).group(1) or "m"
+    shown = ", ".join(names) if len(names) <= 3 else f"{names[0]}, {names[1]}, … {names[-1]}"
+    revolute = [i for i, j in enumerate(robot.joints) if j.type == "R"]
+    in_degrees = [i for i in revolute if f"q{i + 1}_deg" in df]
+    joints = in_degrees or revolute
+    joint_names = [f"q{i + 1}_deg" if in_degrees else _joint_column(df, i) for i in joints]
+    at_the_door(
+        robot,
+        q,
+        y,
+        label=label,
+        position_columns=shown,
+        declared=unit,
+        joint_columns=_listed(joint_names),
+        joints=joints,
+    )
+
+
+def _joint_column(df: pd.DataFrame, i: int) -> str:
+    return f"q{i + 1}_rad" if f"q{i + 1}_rad" in df else f"q{i + 1}"
+
+
+def _listed(names: list[str]) -> str:
+    if len(names) <= 3:
+        return ", ".join(names)
+    return f"{names[0]} … {names[-1]}"
 
 
 def _positions(df: pd.DataFrame, columns, label: str) -> np.ndarray:
@@ -230,7 +263,7 @@ def read_joints(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
     for i, joint in enumerate(robot.joints, start=1):
         name, scale = _pick(df, label, [f"q{i}"], joint)
         q[:, i - 1] = _numbers(df, name, label) * scale
-        if name == f"q{i}":
+        if name in (f"q{i}", f"q{i}_rad", f"q{i}_m"):
             _check_joint_unit(q[:, i - 1], joint, name, label)
     extra = [c for c in columns if (m := _JOINT.match(c)) and int(m.group(1)) > robot.dof]
     if extra:
@@ -243,18 +276,20 @@ def read_joints(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
 
 
 def _check_joint_unit(values: np.ndarray, joint, name: str, label: str) -> None:
-    """Refuse bare joint columns (rad, m) whose values only make sense as deg or mm.
+    """Refuse joint columns in rad or m (bare or named so) whose values only make sense as
+    deg or mm.
 
     A revolute joint's values beyond two turns (or, with limits, beyond twice its range and
     a full turn) are degrees; a prismatic joint's beyond ten times its travel, millimetres.
     """
     largest = float(np.max(np.abs(values)))
+    base = name.split("_")[0]
     if joint.type == "R":
         span = max((abs(v) for v in joint.limits), default=np.pi) if joint.limits else np.pi
         if largest > max(2 * span, 2 * np.pi) + 1e-9:
             raise CalibrationError(
                 f"{label}: column {name!r} (radians) reaches {largest:.4g}, more than this "
-                f"revolute joint turns: the values look like degrees; name it {name}_deg"
+                f"revolute joint turns: the values look like degrees; name it {base}_deg"
             )
     elif joint.limits is not None:
         travel = max(abs(v) for v in joint.limits)
@@ -262,7 +297,7 @@ def _check_joint_unit(values: np.ndarray, joint, name: str, label: str) -> None:
             raise CalibrationError(
                 f"{label}: column {name!r} (metres) reaches {largest:.4g}, more than ten times "
                 f"this prismatic joint's travel ({travel:.3g} m): the values look like "
-                f"millimetres; name it {name}_mm"
+                f"millimetres; name it {base}_mm"
             )
 
 

@@ -94,6 +94,7 @@ def listed(names, most: int = 8) -> str:
 
 
 CAUSES = (
+    "robot keeps its size",  # casecal.identification.scale: a unit slip explains the rest
     "no bound decides an estimate",
     "parameters not asked for do not matter",
     "held parameters do not matter",

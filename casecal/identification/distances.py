@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from ..data.files import _numbers, read_joints, read_table
+from ..data.units import distances_at_the_door
 from ..design.poses import rng_from
 from ..errors import CalibrationError
 from ..model.robot import Robot, check_joint_values
@@ -212,6 +213,7 @@ def identify_distances(
         raise CalibrationError(
             f"poses have {measurements.q.shape[1]} joints; robot has {robot.dof}"
         )
+    distances_at_the_door(robot, measurements.q, measurements.pairs, measurements.distances)
     known = bool(np.all(measurements.sigma > 0))
     w = 1.0 / measurements.sigma if known else np.ones(measurements.n_pairs)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)

@@ -40,6 +40,7 @@ from .facts import gather, point_rms
 from .problem import Problem
 from .reference import frames_fitted
 from .rounds import LOSSES, Settings, fit_in_rounds
+from .scale import door, with_size_check
 from .solvers import SOLVERS
 from .start import choose_frame, partial_base_start
 
@@ -142,6 +143,7 @@ def identify(
             f"measurements have {measurements.q.shape[1]} joint values per pose but robot "
             f"{robot.name!r} has {robot.dof} joints{extra}; use the robot the data came from"
         )
+    door(robot, measurements)  # unit slips, before any fit
     q, y = measurements.q, measurements.points  # y: (N, m, 3)
     robot, point_note = _with_points(robot, measurements.n_points)
     names = selection(robot, parameters) if point_note else names
@@ -209,7 +211,7 @@ def identify(
     got = gather(make, robot, start, reference, names, out, settings, e0, e_before)
     est, x0 = got.estimated, np.zeros(len(out.estimated))
     point_residuals = est.point_residuals(x0)
-    checks = audit(got.facts)
+    checks = with_size_check(audit(got.facts), robot, out.robot, q, y)
     status, message = verdict(checks, out.solver_status, out.message)
 
     calibrated = frame.robot_out(out.robot)

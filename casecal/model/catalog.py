@@ -28,6 +28,7 @@ Every mistake raises `CalibrationError` naming the file, the key and the fix.
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 from importlib import resources
@@ -59,6 +60,34 @@ _TOP_KEYS = TOP_KEYS | {
 }
 _JOINT_KEYS = {"type", "a", "alpha", "d", "theta", "beta", "limits"}
 _FRAME_KEYS = {"xyz", "rpy"}
+
+
+ROBOT_SUFFIXES = (".toml", ".urdf", ".xacro", ".yaml", ".yml")
+"""A robot named with one of these is a path, never a catalog name."""
+
+_FLAGS = {"base_link": "--base-link", "tip_link": "--tip-link"}
+
+
+def missing_file(path: Path) -> str:
+    """The message for a robot file that does not exist: what the folder holds instead."""
+    folder = path.parent
+    where = "the current folder" if str(folder) in ("", ".") else f"folder {str(folder)!r}"
+    if not folder.is_dir():
+        return f"no file {str(path)!r}: {where} does not exist; check the path"
+    try:
+        files = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in ROBOT_SUFFIXES)
+    except OSError:
+        files = []
+    stems = {Path(f).stem.lower(): f for f in files}  # the suffix alone is no likeness
+    close = [stems[c] for c in difflib.get_close_matches(path.stem.lower(), stems, n=3)]
+    if close:
+        found = f"; did you mean {' or '.join(close)}?"
+    elif files:
+        shown = ", ".join(files[:8]) + (f" … ({len(files)} in all)" if len(files) > 8 else "")
+        found = f"; robot files there: {shown}"
+    else:
+        found = f"; {where} holds no robot file ({', '.join(ROBOT_SUFFIXES)})"
+    return f"no file {str(path)!r}: it does not exist in {where}{found}"
 
 
 def _catalog_dir():
@@ -107,24 +136,37 @@ def load_robot(
     """
     text = str(name_or_path)
     path = Path(text)
-    if path.suffix in (".urdf", ".xacro"):
+    suffix = path.suffix.lower()
+    if suffix in ROBOT_SUFFIXES and text != "-" and not path.exists():
+        raise CalibrationError(missing_file(path))
+    if suffix in (".urdf", ".xacro"):
         from .urdf import load_urdf
 
         return load_urdf(path, base_link, tip_link, packages)
-    if path.suffix in (".yaml", ".yml"):
+    if base_link is not None or tip_link is not None or packages is not None:
+        given = [k for k, v in (("base_link", base_link), ("tip_link", tip_link)) if v]
+        flags = f" ({', '.join(_FLAGS[k] for k in given)} on the command line)" if given else ""
+        given += ["packages"] if packages is not None else []
+        raise CalibrationError(
+            f"{'= and '.join(given)}={flags} appl{'ies' if len(given) == 1 else 'y'} to URDF "
+            "and xacro robots only, and "
+            f"{text!r} is not one; leave them out"
+        )
+    if suffix in (".yaml", ".yml"):
         from .ur_kinematics import read_ur_kinematics
 
         return read_ur_kinematics(read_text(path, "UR kinematics file"), str(path), path.stem)
-    if base_link is not None or tip_link is not None or packages is not None:
-        raise CalibrationError("base_link=, tip_link= and packages= apply to URDF files only")
-    if path.suffix == ".toml" or path.exists() or "/" in text or "\\" in text:
+    if suffix == ".toml" or path.exists() or "/" in text or "\\" in text:
         label, source = str(path), read_text(path, "robot file")
     else:
         entry = _catalog_dir() / f"{text}.toml"
         if not entry.is_file():
+            close = difflib.get_close_matches(text, robots(), n=3)
+            maybe = f"did you mean {' or '.join(close)}? " if close else ""
             raise CalibrationError(
-                f"unknown robot {text!r}; catalog robots are: {', '.join(robots())} "
-                "(or give the path of a .toml robot file)"
+                f"unknown robot {text!r}: no catalog robot and no file of that name; "
+                f"{maybe}catalog robots are: {', '.join(robots())} (or give the path of a "
+                f"robot file: {', '.join(ROBOT_SUFFIXES)})"
             )
         label, source = f"catalog robot {text}", read_text(entry, "robot file")
     try:

@@ -203,7 +203,8 @@ def chain_path(joints: list[_Joint], base_link: str | None, tip_link: str | None
     if base_link is None:
         if len(roots) != 1:
             raise CalibrationError(
-                f"{label}: several root links ({', '.join(roots)}); give base_link="
+                f"{label}: several root links ({', '.join(roots)}); give base_link= one of "
+                "them (--base-link on the command line)"
             )
         base_link = roots[0]
     if base_link not in children:
@@ -232,7 +233,7 @@ def chain_path(joints: list[_Joint], base_link: str | None, tip_link: str | None
         if len(tips) != 1:
             raise CalibrationError(
                 f"{label}: more than one chain ends here; give tip_link= one of "
-                f"{', '.join(tips) or '(no movable chain found)'}"
+                f"{', '.join(tips) or '(no movable chain found)'} (--tip-link on the command line)"
             )
         tip_link = tips[0]
     path = path_to(tip_link)
@@ -310,7 +311,7 @@ def read_urdf(
     if passive:
         raise CalibrationError(
             f"{label}: mimic joint {passive[0].name!r} comes after the last actuated joint; "
-            "end the chain before it with tip_link="
+            "end the chain before it with tip_link= (--tip-link on the command line)"
         )
     tool_xyz, tool_rpy = split(pending)
     inertials = tuple(_combined(parts) for parts in bodies if parts is not None)
@@ -414,6 +415,6 @@ def _expand_xacro(path: Path, packages: dict[str, str]) -> str:
         detail = " ".join(str(exc).split())
         raise CalibrationError(
             f"{path}: xacro could not expand it ({detail}); name the ROS packages it "
-            "finds with packages={name: folder}, or run 'xacro FILE > robot.urdf' in its "
-            "workspace and load the .urdf"
+            "finds with packages={name: folder} (Python: load_robot), or run 'xacro FILE > "
+            "robot.urdf' in its workspace and load the .urdf (the command line's way)"
         ) from None
