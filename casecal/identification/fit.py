@@ -200,7 +200,7 @@ def identify(
     status, message = verdict(checks, out.solver_status, out.message)
 
     calibrated = frame.robot_out(out.robot)
-    cov = frame.covariance_out(got.covariance, out.estimated, out.robot)
+    cov = frame.covariance_out(got.covariance, out.estimated, out.robot, robot.base.rpy)
     se = dict.fromkeys(names, float("nan"))
     se.update(zip(out.estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
     cal = Calibration(
