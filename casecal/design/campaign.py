@@ -83,7 +83,7 @@ def predicted_error(cal: Calibration, q_holdout: np.ndarray, level: float = 0.95
     eigenvalues. `C` is inflated by the fit's reduced χ² when that exceeds 1, so a model
     that does not fit its data cannot promise a small error.
     """
-    J, _ = cal.robot.position_jacobian(q_holdout, list(cal.estimated))
+    J, _ = cal.robot.position_jacobian(q_holdout, list(cal.estimated), deviations=True)
     cov = np.einsum("nik,kl,njl->nij", J, cal.covariance, J)  # (N, 3, 3)
     lam = np.clip(np.linalg.eigvalsh(cov), 0.0, None)  # (N, 3)
     radius = np.quantile(np.sqrt((_Z**2) @ lam.T), level, axis=0)  # (N,)

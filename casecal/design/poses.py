@@ -142,7 +142,7 @@ def optimal(
     if cand.ndim != 2 or cand.shape[1] != robot.dof or len(cand) < n:
         raise CalibrationError(f"candidates must be (C, {robot.dof}) with C >= n = {n}")
     names = selection(robot, parameters)
-    J, names = robot.position_jacobian(cand, names)
+    J, names = robot.position_jacobian(cand, names, deviations=True)  # what a fit estimates
     base = analyse(J.reshape(-1, len(names)), names, len(cand)).base_parameters
     J = J[:, :, [names.index(b) for b in base]]
     scale = np.linalg.norm(J.reshape(-1, len(base)), axis=0)
@@ -152,7 +152,7 @@ def optimal(
         raise CalibrationError(f"{n} poses give {3 * n} coordinates for {k} parameters")
     M0 = None
     if include is not None and len(include):
-        Ji, _ = robot.position_jacobian(np.asarray(include, float), names)
+        Ji, _ = robot.position_jacobian(np.asarray(include, float), names, deviations=True)
         Ji = Ji[:, :, [names.index(b) for b in base]] / scale
         M0 = np.einsum("cik,cil->kl", Ji, Ji)
     chosen = _greedy(J, n, criterion, M0)

@@ -159,9 +159,9 @@ def observability(
         )
     q2, _ = check_joint_values(q, robot.dof)
     if measurement == "position":
-        J, names = robot.position_jacobian(q2, selection(robot, parameters))
+        J, names = robot.position_jacobian(q2, selection(robot, parameters), deviations=True)
     else:
-        J, names = robot.pose_jacobian(q2, selection(robot, parameters))
+        J, names = robot.pose_jacobian(q2, selection(robot, parameters), deviations=True)
         J = np.concatenate([J[:, :3], orientation_weight * J[:, 3:]], axis=1)
     return analyse(J.reshape(-1, len(names)), names, n_poses=q2.shape[0])
 

@@ -557,6 +557,7 @@ def predicted_rms(
     if not estimated:
         return 0.0, correction
     chain = kinematics.chain(robot.structure)
-    J = chain.evaluate("points_jacobian", q, robot.vector(), chain.columns(list(estimated)))
+    p = robot.vector()  # anchored: columns in the deviations, those `cov` is of
+    J = chain.evaluate("points_jacobian", q, p, chain.columns(list(estimated)), anchor=p)
     mean_square = np.einsum("nik,kl,nil->", J, cov, J) / (J.shape[0] * J.shape[1] / 3)
     return float(np.sqrt(max(mean_square, 0.0))), correction

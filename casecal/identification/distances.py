@@ -19,6 +19,7 @@ from ..data.files import _numbers, read_joints, read_table
 from ..data.units import distances_at_the_door
 from ..design.poses import rng_from
 from ..errors import CalibrationError
+from ..model import kinematics
 from ..model.robot import Robot, check_joint_values
 from .analysis import analyse, represent, selection
 from .audit import Audit, Facts, audit, smoothness
@@ -182,7 +183,13 @@ class _DistanceProblem:
     def jacobian(self, x):
         v, d = self._geometry(x)
         u = v / np.maximum(d, 1e-300)[:, None]
-        J, _ = self._robot(x).position_jacobian(self.q, list(self.names))
+        # exact in x: the deviations' columns about the start, at start + x (`_robot`)
+        chain = kinematics.chain(self.robot.structure)
+        columns = chain.columns(self.names)
+        p0 = self.robot.vector()
+        p = p0.copy()
+        p[list(columns)] += x
+        J = chain.evaluate("position_jacobian", self.q, p, columns, anchor=p0)
         Jd = np.einsum("pi,pik->pk", u, J[self.m.pairs[:, 0]] - J[self.m.pairs[:, 1]])
         return Jd * self.w_flat[:, None]
 
@@ -232,7 +239,7 @@ def identify_distances(
     r, J = problem.residual(x0), problem.jacobian(x0)
     r0 = full.residual(np.zeros(len(names)))
     cov, se = uncertainty(J, r, known, names, fit.estimated)
-    deviations = {n: fit.robot.parameters[n] - robot.parameters[n] for n in names}
+    deviations = fit.robot.deviations_from(robot, names)  # rotations: not differences
     outside = [n for n in robot.parameter_names if n not in names]
     unasked = outside_gain(
         _DistanceProblem(fit.robot, measurements, w, [*fit.estimated, *outside]), fit.estimated

@@ -84,7 +84,8 @@ def gather(
     linear = est.reduced(x0)
     prior_w = np.array([1.0 / settings.prior.get(n, np.inf) for n in out.estimated])
     cov, _ = uncertainty(linear, None, settings.known, names, out.estimated, prior_w)
-    deviation = np.array([out.robot.parameters[n] - start.parameters[n] for n in out.estimated])
+    moved = out.robot.deviations_from(start, out.estimated)  # rotations: not differences
+    deviation = np.array([moved[n] for n in out.estimated])
     fit = _with_prior(linear, prior_w, deviation)
     r_start = at_start.residual(np.zeros(len(names)))
     active = _active(out.estimated, deviation, settings.bounds)

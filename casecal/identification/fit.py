@@ -215,17 +215,16 @@ def identify(
     status, message = verdict(checks, out.solver_status, out.message)
 
     calibrated = frame.robot_out(out.robot)
-    cov = frame.covariance_out(got.covariance, out.estimated, out.robot)
+    cov = frame.covariance_out(got.covariance, out.estimated, out.robot, robot.base.rpy)
     se = dict.fromkeys(names, float("nan"))
     se.update(zip(out.estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
-    p_nominal, p_final = robot.parameters, calibrated.parameters
     cal = Calibration(
         method=method,
         nominal=robot,
         robot=calibrated,
         parameters=tuple(names),
         estimated=out.estimated,
-        deviations={n: p_final[n] - p_nominal[n] for n in names},
+        deviations=calibrated.deviations_from(robot, names),  # rotations: not differences
         standard_errors=se,
         covariance=cov,
         residuals=frame.vectors_out(point_residuals).reshape(-1, 3),

@@ -159,14 +159,21 @@ class Problem:
             for key in small[: max(len(small) + 1 - MEMO_SMALL, 0)]:
                 del self._memo[key]
 
+    def _at(self, p: np.ndarray) -> bytes:
+        """What names `p` in memo keys: with `p0`, the rotations' anchor (the same `p`
+        from another start is another robot, `casecal.model.kinematics`)."""
+        return p.tobytes() + self.p0.tobytes()
+
     def _evaluation_key(self, kind: str, p: np.ndarray) -> tuple:
-        return (kind, self.robot.structure, self._poses, p.tobytes())
+        return (kind, self.robot.structure, self._poses, self._at(p))
 
     def _evaluate(self, kind: str, p: np.ndarray) -> np.ndarray:
         key = self._evaluation_key(kind, p)
-        return self._memoised(key, lambda: self.chain.evaluate(kind, self.q, p))
+        return self._memoised(key, lambda: self.chain.evaluate(kind, self.q, p, anchor=self.p0))
 
     def p(self, x: np.ndarray) -> np.ndarray:
+        """The kernels' parameter vector at `x`: ``p0 + x``, the rotations' entries about
+        the anchor `p0` (`casecal.model.rotation_chart`, `casecal.model.kinematics`)."""
         p = self.p0.copy()
         p[list(self.columns)] += x
         return p
@@ -225,7 +232,7 @@ class Problem:
             Of the columns `names`, with ``rows`` the N · rows-per-pose residuals.
         """
         p = self.p(x)
-        at = ("reduced", self.robot.structure, p.tobytes(), self._weights)
+        at = ("reduced", self.robot.structure, self._at(p), self._weights)
         whole = self._memo.get((*at, self.kernel_columns)) or self._from_wider(at)
         if whole is None and not exact:
             r = self.residual(x) if r is None else r
@@ -268,7 +275,7 @@ class Problem:
         return other
 
     def _normal_key(self, p: np.ndarray) -> tuple:
-        return ("normal", self.robot.structure, p.tobytes(), self._weights, self.kernel_columns)
+        return ("normal", self.robot.structure, self._at(p), self._weights, self.kernel_columns)
 
     def _cuts(self) -> tuple[list[slice], list[slice], tuple[int, int, int]]:
         """The batches' slices of the poses and of the residual vector, and the shape of a
@@ -354,11 +361,15 @@ class Problem:
         q, k = self.q[poses], len(self.kernel_columns)
         out = None if buffer is None else buffer[: len(q)]
         if self.R is None:
-            both = self.chain.evaluate("points_and_jacobian", q, p, self.kernel_columns, out)
+            both = self.chain.evaluate(
+                "points_and_jacobian", q, p, self.kernel_columns, out, anchor=self.p0
+            )
             J, f = both[:, :, :k], both[:, :, k]
         else:  # rotation rows under the points' rows
-            J = self.chain.evaluate("points_jacobian", q, p, self.kernel_columns)  # (n, 3m, k)
-            rot = self.chain.evaluate("pose_jacobian", q, p, self.kernel_columns)[:, 3:, :]
+            J = self.chain.evaluate("points_jacobian", q, p, self.kernel_columns, anchor=self.p0)
+            rot = self.chain.evaluate("pose_jacobian", q, p, self.kernel_columns, anchor=self.p0)[
+                :, 3:, :
+            ]  # J: (n, 3m, k)
             J, f = np.concatenate([J, rot], axis=1, out=out), None
         J *= self.w_rows[poses, :, None]  # J is this call's own (or the caller's buffer)
         return J.reshape(-1, k), f

@@ -35,6 +35,7 @@ import numpy as np
 from ..design.poses import uniform
 from ..errors import CalibrationError
 from ..model.robot import Robot
+from ..model.rotation_chart import deviations_between
 from .analysis import Observability, analyse, pivot_order
 from .outliers import outlier_poses
 from .problem import Problem
@@ -173,7 +174,8 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         frozen.update(dict.fromkeys(lost, FROZEN))
         J_work = workspace_jacobian(point, q_work, names, full)
         noise = float(np.sqrt(3 * np.mean(1.0 / settings.w**2))) if settings.known else None
-        offsets = np.array([point.parameters[n] - hold[n] for n in visible])
+        moved = deviations_between(hold, point.parameters, visible)  # rotations: a turn
+        offsets = np.array([moved[n] for n in visible])
         keep, dropped = prune(
             linear,
             names,
@@ -315,7 +317,7 @@ def _solve_round(make, point, names, estimated, settings: Settings, weights, hol
         kwargs["callback"] = report
     if settings.method == "ipopt":
         # bounds and prior are on deviations from nominal; x is from the current point
-        offset = {n: point.parameters[n] - hold[n] for n in estimated}
+        offset = deviations_between(hold, point.parameters, estimated)
         kwargs["bounds"] = {
             n: (lo - offset[n], hi - offset[n])
             for n, (lo, hi) in settings.bounds.items()
@@ -381,5 +383,6 @@ def workspace_jacobian(point: Robot, q_work, names, full: Problem) -> np.ndarray
         n = len(full.q)
         q_work = full.q[np.unique(np.linspace(0, n - 1, min(n, WORKSPACE_POSES)).astype(int))]
     chain = full.chain
-    J = chain.evaluate("points_jacobian", q_work, point.vector(), full.kernel_columns)
+    p = point.vector()  # anchored: columns in the deviations, as the fit's (Problem.p)
+    J = chain.evaluate("points_jacobian", q_work, p, full.kernel_columns, anchor=p)
     return J.reshape(-1, J.shape[-1])[:, full.take]

@@ -22,6 +22,7 @@ import numpy as np
 from ..model.frames import matrix_from_rpy, rigid_fit, rpy_from_matrix
 from ..model.parameters import frame_names
 from ..model.robot import Frame, Robot
+from ..model.rotation_chart import deviate, deviation
 
 BASE = frame_names("base")
 
@@ -76,28 +77,42 @@ class FitFrame:
             return robot
         return dataclasses.replace(robot, base=self.base_out(robot.base), auto_beta=False)
 
-    def covariance_out(self, cov: np.ndarray, estimated, robot: Robot) -> np.ndarray:
+    def covariance_out(
+        self, cov: np.ndarray, estimated, robot: Robot, nominal_rpy=None
+    ) -> np.ndarray:
         """`cov` of `estimated` (fit frame, at `robot`) with base entries mapped out.
 
-        The map from fit-frame to instrument-frame base parameters is linearised by
-        central differences; held base parameters are constants of the map.
+        The map from fit-frame to instrument-frame base deviations is linearised by
+        central differences; held base parameters are constants of the map. Rotations
+        deviate by a turn (`casecal.model.rotation_chart`): in the fit frame about
+        `robot`'s base, as the fit's covariance is; out, about `nominal_rpy` (default: the
+        mapped base's own), as the reported deviations are.
         """
         idx = [k for k, n in enumerate(estimated) if n in BASE]
         if self.is_identity or not idx:
             return cov
         at = np.array([*robot.base.xyz, *robot.base.rpy])
+        anchor = _xyz_rpy_vector(self._out_matrix(at))[3:] if nominal_rpy is None else nominal_rpy
         slots = [BASE.index(estimated[k]) for k in idx]
         M = np.eye(len(estimated))
         h = 1e-6
         for col, slot in zip(idx, slots, strict=True):
-            step = np.zeros(6)
-            step[slot] = h
-            up = _xyz_rpy_vector(self._out_matrix(at + step))
-            down = _xyz_rpy_vector(self._out_matrix(at - step))
+            up, down = (_xyz_rpy_vector(self._out_matrix(_stepped(at, slot, s))) for s in (h, -h))
             diff = up - down
+            diff[3:] = np.subtract(deviation(anchor, up[3:]), deviation(anchor, down[3:]))
             diff[3:] = (diff[3:] + np.pi) % (2 * np.pi) - np.pi  # angles wrap at ±π
             M[np.ix_(idx, [col])] = (diff[slots] / (2 * h))[:, None]
         return M @ cov @ M.T
+
+
+def _stepped(at: np.ndarray, slot: int, h: float) -> np.ndarray:
+    """Base values `at` (xyz, rpy) deviated by `h` in `slot` (0-5), rotations by a turn."""
+    out = at.copy()
+    if slot < 3:
+        out[slot] += h
+    else:
+        out[3:] = deviate(at[3:], np.eye(3)[slot - 3] * h)
+    return out
 
 
 def _xyz_rpy(T: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:

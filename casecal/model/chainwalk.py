@@ -36,7 +36,7 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None, joint_t
     """Walk `structure` from `base` with effective joint variables `q_eff` (list of SX);
     `after[i]`, when given and not None, is applied after joint i's link; `joint_trig[i]`,
     when given and not None, is (cos, sin) of revolute joint i's angle (offset included)."""
-    from .kinematics import frame_transform, joint_motion, link_transform
+    from .kinematics import frame_transform, joint_motion, link_transform, rotation_trig
 
     T, axes, points, bodies = base, [], [], []
     after = after or [None] * len(q_eff)
@@ -53,12 +53,12 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None, joint_t
         ):
             for p_name, p_type, p_axis, master, multiplier, offset in before:
                 xyz = [P[f"{p_name}.{c}"] for c in "xyz"]
-                rpy = [trig[f"{p_name}.{c}"] for c in ("roll", "pitch", "yaw")]
+                rpy = rotation_trig(trig, [f"{p_name}.{c}" for c in ("roll", "pitch", "yaw")])
                 T = T @ frame_transform(xyz, rpy)
                 T = T @ joint_motion(p_type, p_axis, multiplier * q_eff[master] + offset)
             xyz = [P[f"{name}.{c}"] for c in "xyz"]
             origin = T @ frame_transform(
-                xyz, [trig[f"{name}.{c}"] for c in ("roll", "pitch", "yaw")]
+                xyz, rotation_trig(trig, [f"{name}.{c}" for c in ("roll", "pitch", "yaw")])
             )
             axes.append(origin[:3, :3] @ ca.DM(axis))
             points.append(origin[:3, 3])

@@ -24,13 +24,36 @@ def matrix_from_rpy(rpy) -> np.ndarray:
     )
 
 
-def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:
-    """Inverse of `matrix_from_rpy` (ry in [-π/2, π/2]); rad."""
+NEAR_LOCK = 0.1
+"""``|cos ry|`` below which `rpy_from_matrix` takes the roll from what the yaw and pitch
+leave, rather than from the last row alone."""
+
+AT_LOCK = 1e-14
+"""``|cos ry|`` below which the matrix fixes only yaw ∓ roll, to rounding: `rpy_from_matrix`
+then keeps the yaw of its `hint`."""
+
+
+def rpy_from_matrix(R: np.ndarray, hint=None) -> tuple[float, float, float]:
+    """Inverse of `matrix_from_rpy` (ry in [-π/2, π/2]); rad.
+
+    Near ry = ±π/2 (gimbal lock) the roll and the yaw are each ill-determined, though the
+    matrix is not: taken each from its own entries, their errors (ε / |cos ry|) would not
+    cancel, and the rebuilt matrix would be off by as much. There the roll is taken from
+    ``Ry(ry)ᵀ Rz(rz)ᵀ R``, so that whatever the yaw's error the three rebuild `R` to
+    rounding; at the lock itself (``|cos ry|`` < `AT_LOCK`) the yaw is the `hint`'s
+    (rx, ry, rz), when given, so that a frame there keeps the split its file gave.
+    """
+    R = np.asarray(R, dtype=float)
     # atan2 rather than arcsin(-R[2, 0]): arcsin loses half the digits near ±π/2
-    ry = float(np.arctan2(-R[2, 0], np.hypot(R[0, 0], R[1, 0])))
-    rx = float(np.arctan2(R[2, 1], R[2, 2]))
+    cy = float(np.hypot(R[0, 0], R[1, 0]))
+    ry = float(np.arctan2(-R[2, 0], cy))
     rz = float(np.arctan2(R[1, 0], R[0, 0]))
-    return rx, ry, rz
+    if cy >= NEAR_LOCK:
+        return float(np.arctan2(R[2, 1], R[2, 2])), ry, rz
+    if cy < AT_LOCK and hint is not None:
+        rz = float(hint[2])
+    M = matrix_from_rpy((0.0, ry, rz)).T @ R  # Rx(rx), to rounding
+    return float(np.arctan2(M[2, 1], M[1, 1])), ry, rz
 
 
 def rigid_fit(P: np.ndarray, Y: np.ndarray, weights: np.ndarray | None = None):

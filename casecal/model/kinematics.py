@@ -21,6 +21,18 @@ Modified DH (``"mdh"``, Craig), where ``a_i, alpha_i`` of row ``i`` are Craig's
 The whole chain is ``T = B · A_1 ⋯ A_n · E`` with base ``B`` and tool ``E`` each
 ``Trans(x, y, z) · Rz(rz) Ry(ry) Rx(rx)``.
 
+Rotations about an anchor
+-------------------------
+A frame's rotation (base, tool, URDF origin) enters as ``Rz(ȳ) Ry(p̄) · Rz(yaw - ȳ)
+Ry(pitch - p̄) · Rx(roll)``, with the anchor ``(p̄, ȳ)`` an input of every call
+(`Chain.extended`). Without an anchor (0) that is ``Rz(yaw) Ry(pitch) Rx(roll)``, and the
+Jacobian columns are the derivatives in the angles, as `Robot.position_jacobian` gives
+them: at pitch ±90° those of roll and yaw are parallel. With the anchor at the parameters'
+own values ``p₀``, the value at ``p₀ + x`` is the robot at ``p₀`` deviated by ``x`` as
+`casecal.model.rotation_chart` defines it, and the columns are the derivatives in ``x``,
+never parallel: what a fit steps in (`casecal.identification.problem`). Anchors are
+inputs, not constants: one graph and one compiled kernel serve every robot of a structure.
+
 Hayati's beta
 -------------
 When two consecutive joint axes are (nearly) parallel, the common normal between them can
@@ -49,6 +61,7 @@ from . import _trig
 from ._evaluate import BUILDING, COMPILE_MIN_POSES, HOT_CALLS, Evaluator, write_into
 from .chainwalk import walk
 from .parameters import parameter_names, urdf_parameter_names
+from .rotation_chart import is_anchored
 
 log = logging.getLogger(__name__)
 
@@ -153,10 +166,30 @@ def _trans(x, y, z) -> ca.SX:
     return T
 
 
+ANCHOR = "@anchor"
+"""Suffix of the keys of the anchors' (cos, sin) in the graph's trigonometry (`rotation_trig`)."""
+
+
 def frame_transform(xyz, rpy_cs) -> ca.SX:
-    """``Trans(x, y, z) · Rz(rz) Ry(ry) Rx(rx)``; `rpy_cs` holds (cos, sin) of rx, ry, rz."""
+    """``Trans(x, y, z) · Rz(rz) Ry(ry) Rx(rx)``; `rpy_cs` holds (cos, sin) of rx, ry, rz.
+
+    With five pairs, of rx, ry - ry₀, rz - rz₀, ry₀ and rz₀ (an anchor, module doc), the
+    same rotation as ``Rz(rz₀) Ry(ry₀) · Rz(rz - rz₀) Ry(ry - ry₀) · Rx(rx)``.
+    """
+    if len(rpy_cs) == 5:
+        (cx, sx), (cy, sy), (cz, sz), (acy, asy), (acz, asz) = rpy_cs
+        turn = _rot("z", acz, asz) @ _rot("y", acy, asy) @ _rot("z", cz, sz)
+        return _trans(*xyz) @ turn @ _rot("y", cy, sy) @ _rot("x", cx, sx)
     (cx, sx), (cy, sy), (cz, sz) = rpy_cs
     return _trans(*xyz) @ _rot("z", cz, sz) @ _rot("y", cy, sy) @ _rot("x", cx, sx)
+
+
+def rotation_trig(trig: dict, names) -> list:
+    """The (cos, sin) pairs `frame_transform` takes for the rotation named (roll, pitch,
+    yaw) `names`: with the anchors of pitch and yaw where `trig` holds them."""
+    pairs = [trig[n] for n in names]
+    anchors = [trig.get(n + ANCHOR) for n in names[1:]]
+    return pairs + anchors if all(a is not None for a in anchors) else pairs
 
 
 def link_transform(
@@ -218,7 +251,7 @@ class _Graph(NamedTuple):
     p: ca.SX  # the parameters, (n_params,)
     cos: ca.SX  # cos and sin of the constant angles (`Chain.angle_index`)
     sin: ca.SX
-    pext: ca.SX  # p, cos, sin: the Functions' parameter input
+    pext: ca.SX  # p, cos, sin, then cos and sin of the anchors: the parameter input
     T: ca.SX  # the tool pose, 4 × 4
     qin: ca.SX  # q, jcos, jsin: the Functions' per-pose input
     jcos: ca.SX  # cos and sin of the revolute joints' angles (`Chain.joint_trig`)
@@ -248,6 +281,9 @@ class Chain:
         self.names = structure.names
         self.index = {n: k for k, n in enumerate(self.names)}
         self.angle_index = [k for k, n in enumerate(self.names) if is_constant_angle(n)]
+        # pitches and yaws: their angles enter relative to an anchor (module doc)
+        self.relative = [t for t, k in enumerate(self.angle_index) if is_anchored(self.names[k])]
+        self.anchor_index = [self.angle_index[t] for t in self.relative]
         self.joint_trig = self._joint_trig()
         self._graph = None
         self._evaluators: dict = {}
@@ -295,19 +331,23 @@ class Chain:
         q = ca.SX.sym("q", structure.n_inputs)
         p = ca.SX.sym("p", len(self.names))
         cos, sin = ca.SX.sym("cos", m), ca.SX.sym("sin", m)
+        n_a = len(self.anchor_index)
+        acos, asin = ca.SX.sym("acos", n_a), ca.SX.sym("asin", n_a)
         n_t = len(self.joint_trig)
         jcos, jsin = ca.SX.sym("jcos", n_t), ca.SX.sym("jsin", n_t)
         joint_trig = [None] * len(structure.joint_types)
         for t, (i, _) in enumerate(self.joint_trig):
             joint_trig[i] = (jcos[t], jsin[t])
-        symbols = (q, p, cos, sin, ca.vertcat(p, cos, sin))
+        symbols = (q, p, cos, sin, ca.vertcat(p, cos, sin, acos, asin))
         joints = (ca.vertcat(q, jcos, jsin), jcos, jsin)
         trig = {self.names[k]: (cos[t], sin[t]) for t, k in enumerate(self.angle_index)}
+        for t, k in enumerate(self.anchor_index):
+            trig[self.names[k] + ANCHOR] = (acos[t], asin[t])
         P = {name: p[k] for k, name in enumerate(self.names)}
 
         def frame(prefix):
             xyz = [P[f"{prefix}_{a}"] for a in "xyz"]
-            return frame_transform(xyz, [trig[f"{prefix}_r{a}"] for a in "xyz"])
+            return frame_transform(xyz, rotation_trig(trig, [f"{prefix}_r{a}" for a in "xyz"]))
 
         base = frame("base")
         dof = len(structure.joint_types)
@@ -336,10 +376,17 @@ class Chain:
         T = walk(structure, base, q_eff, P, trig, joint_trig=joint_trig).T
         return _Graph(*symbols, T @ frame("tool"), *joints)
 
-    def extended(self, p: np.ndarray) -> np.ndarray:
-        """The graph's input: `p` followed by cos and sin of its constant angles."""
+    def extended(self, p: np.ndarray, anchor: np.ndarray | None = None) -> np.ndarray:
+        """The graph's input: `p`, cos and sin of its constant angles (pitches and yaws less
+        their anchors), then cos and sin of the anchors.
+
+        `anchor` (n_params,), default none (0): where the rotations' pitches and yaws are
+        taken from (module doc); only those entries are read.
+        """
         angles = p[self.angle_index]
-        return np.concatenate([p, np.cos(angles), np.sin(angles)])
+        at = np.zeros(len(self.anchor_index)) if anchor is None else anchor[self.anchor_index]
+        angles[self.relative] -= at
+        return np.concatenate([p, np.cos(angles), np.sin(angles), np.cos(at), np.sin(at)])
 
     def _jacobian(self, expr: ca.SX, columns: tuple[int, ...]) -> ca.SX:
         """Exact ∂expr/∂p[columns], constant angles through their cos and sin.
@@ -438,7 +485,13 @@ class Chain:
         return f
 
     def evaluate(
-        self, kind: str, q: np.ndarray, p: np.ndarray, columns=(), out: np.ndarray | None = None
+        self,
+        kind: str,
+        q: np.ndarray,
+        p: np.ndarray,
+        columns=(),
+        out: np.ndarray | None = None,
+        anchor: np.ndarray | None = None,
     ) -> np.ndarray:
         """Evaluate `kind` at N poses in one call.
 
@@ -458,6 +511,11 @@ class Chain:
             C-contiguous float64 array of the output's shape to write into: a batch loop
             that reuses one spares the allocator (fresh pages of megabytes per batch, with
             threads faulting them in against each other, cost more than the kernel).
+        anchor : ndarray, shape (n_params,), optional
+            The rotations' anchor (module doc). Default none: the columns of a pitch or
+            yaw are derivatives in the angle. Given, the value at ``p = anchor + x`` is the
+            robot at `anchor` deviated by ``x`` (`casecal.model.rotation_chart`), and the
+            columns are the derivatives in ``x``.
 
         Returns
         -------
@@ -475,13 +533,13 @@ class Chain:
             if hot >= HOT_CALLS:
                 jacobian = kind in PARAMETER_JACOBIANS
                 every = tuple(range(len(self.names))) if jacobian else ()
-                value = self._evaluator(kind, every).compiled(q, self.extended(p))
+                value = self._evaluator(kind, every).compiled(q, self.extended(p, anchor))
                 if value is not None:
                     if kind == "points_and_jacobian":  # and the points, the last column
                         columns = (*columns, len(self.names))
                     value = value[..., list(columns)] if jacobian else value
                     return value if out is None else write_into(out, value)
-        return self._evaluator(kind, columns)(q, self.extended(p), out)
+        return self._evaluator(kind, columns)(q, self.extended(p, anchor), out)
 
     def _evaluator(self, kind: str, columns: tuple[int, ...]) -> Evaluator:
         key = (kind, columns)

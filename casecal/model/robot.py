@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import CalibrationError
 from . import kinematics
 from .parameters import FRAME_AXES, select
+from .rotation_chart import deviated, deviations_between
 
 DEFAULT_REVOLUTE_LIMITS = (-math.pi, math.pi)
 """Limits (rad) assumed for a revolute joint whose table gives none."""
@@ -359,6 +360,12 @@ class Robot:
     def with_deviations(self, deviations: Mapping[str, float]) -> Robot:
         """A new Robot with `deviations` (SI: m, rad) added to the named parameters.
 
+        The deviations of a frame's rotation (``base_rx`` … ``base_rz``, ``tool_r*``, a URDF
+        origin's ``.roll``, ``.pitch``, ``.yaw``) turn it by ``Rz(δyaw) Ry(δpitch)`` between
+        its nominal yaw and pitch and its roll (`casecal.model.rotation_chart`): that is
+        adding them to the angles where the nominal pitch is 0 or δyaw is 0, and, unlike
+        adding, turns the frame every way at pitch ±90° too. `deviations_from` inverts it.
+
         Examples
         --------
         >>> true = robot.with_deviations({"theta1": 1.745e-4, "a2": -2e-4})  # doctest: +SKIP
@@ -373,10 +380,25 @@ class Robot:
         values = {}
         for n, v in deviations.items():
             try:
-                values[n] = p[n] + float(v)
+                values[n] = float(v)
             except (TypeError, ValueError):
                 raise CalibrationError(f"deviation of {n!r}: {v!r} is not a number") from None
-        return self.with_parameters(values)
+        return self.with_parameters(deviated(p, values))
+
+    def deviations_from(self, nominal: Robot, names=None) -> dict[str, float]:
+        """The deviations (SI) that `with_deviations` takes `nominal` to this robot by.
+
+        Differences of lengths and lone angles; of a frame's rotation, the inverse of the
+        turn `with_deviations` applies (`casecal.model.rotation_chart.deviations_between`).
+
+        Parameters
+        ----------
+        nominal : Robot
+            Of the same structure.
+        names : sequence of str, optional
+            Default: every parameter.
+        """
+        return deviations_between(nominal.parameters, self.parameters, names)
 
     # --- kinematics -------------------------------------------------------------------
 
@@ -410,7 +432,9 @@ class Robot:
         out = ch.evaluate("points", q2, self.vector()).reshape(q2.shape[0], -1, 3)
         return out[0] if single else out
 
-    def position_jacobian(self, q, parameters=None) -> tuple[np.ndarray, list[str]]:
+    def position_jacobian(
+        self, q, parameters=None, deviations: bool = False
+    ) -> tuple[np.ndarray, list[str]]:
         """Exact Jacobian of the tool-point position with respect to geometric parameters.
 
         Parameters
@@ -420,6 +444,12 @@ class Robot:
         parameters : str, list of str or None
             Which parameters (names, families or ``"all"``; see `casecal.model.parameters.select`).
             Default None: every parameter.
+        deviations : bool
+            False: derivatives in the parameters' values (`with_parameters`). True: in
+            their deviations (`with_deviations`), what `casecal.identify` estimates; they
+            differ for the pitch and yaw of a rotation, whose columns in the angles are
+            parallel to the roll's at pitch ±90° and in the deviations never are
+            (`casecal.model.rotation_chart`).
 
         Returns
         -------
@@ -429,13 +459,16 @@ class Robot:
             The k parameter names, in column order.
         """
         names = select(self.parameter_names, parameters)
-        return self._evaluate("position_jacobian", q, names), names
+        return self._evaluate("position_jacobian", q, names, deviations), names
 
-    def pose_jacobian(self, q, parameters=None) -> tuple[np.ndarray, list[str]]:
+    def pose_jacobian(
+        self, q, parameters=None, deviations: bool = False
+    ) -> tuple[np.ndarray, list[str]]:
         """Exact Jacobian of the pose error ``(δposition, δφ)`` with respect to parameters.
 
         The orientation error δφ is the rotation vector of ``R(p + δp) R(p)ᵀ`` (world frame),
-        so column ``k`` of rows 3-5 is ``vee(∂R/∂p_k Rᵀ)``.
+        so column ``k`` of rows 3-5 is ``vee(∂R/∂p_k Rᵀ)``. `parameters` and `deviations` as
+        for `position_jacobian`.
 
         Returns
         -------
@@ -444,12 +477,14 @@ class Robot:
         names : list of str
         """
         names = select(self.parameter_names, parameters)
-        return self._evaluate("pose_jacobian", q, names), names
+        return self._evaluate("pose_jacobian", q, names, deviations), names
 
-    def _evaluate(self, kind: str, q, names: Sequence[str] = ()) -> np.ndarray:
+    def _evaluate(self, kind: str, q, names: Sequence[str] = (), deviations=False) -> np.ndarray:
         q2, single = check_joint_values(q, self.dof, len(self.inputs))
         ch = kinematics.chain(self.structure)
-        out = ch.evaluate(kind, q2, self.vector(), ch.columns(names) if names else ())
+        p = self.vector()
+        columns = ch.columns(names) if names else ()
+        out = ch.evaluate(kind, q2, p, columns, anchor=p if deviations else None)
         return out[0] if single else out
 
     def __repr__(self) -> str:
