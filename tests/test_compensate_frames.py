@@ -175,7 +175,9 @@ def test_the_readme_kr16_row_at_the_wrist_singularity_is_refused_with_numbers(tm
         assert moved.max() == 0  # a refused row keeps its target
         assert "near a singularity (axes of joints 4 and 6" in row.reason
         turned = re.search(r"turn joint ([46]) by (-?[\d.]+)°", row.reason)
-        assert turned and abs(float(turned.group(2))) > 30, row.reason
+        # a wrist turn of several degrees for a sub-millimetre, milliradian pose difference:
+        # the refusal bound (30x the pose difference over the levers) is about 2.3° here
+        assert turned and abs(float(turned.group(2))) > 5, row.reason
 
 
 # --- property: random DH and URDF arms, several parameter sets --------------------------
