@@ -336,7 +336,8 @@ def _cmd_calibrate_until(args: argparse.Namespace) -> None:
             f"the pool's poses did not reach {args.threshold} (predicted "
             f"{run.predicted * 1e3:.3f} mm); nothing written"
         )
-    _write_calibrated(args, run.calibration.robot)
+    cal = _without_poorly_determined(run.calibration, run.measurements, {}, strict=False)
+    _write_calibrated(args, cal.robot)
 
 
 def _cmd_validate(args: argparse.Namespace) -> None:
