@@ -153,3 +153,20 @@ def predicted_holdout_rms(cal, q, sigma: float) -> float:
     J, _ = cal.robot.position_jacobian(q, list(cal.estimated))
     var = np.einsum("nik,kl,nil->n", J, cal.covariance, J)
     return float(np.sqrt(3 * sigma**2 + np.mean(var)))
+
+
+def _strategy():
+    from hypothesis import strategies as st
+
+    return st.builds(
+        random_case,
+        seed=st.integers(0, 2**31),
+        noisy=st.booleans(),
+        n_joints=st.integers(3, 7),
+        convention=st.sampled_from(["dh", "mdh"]),
+        tool_kind=st.sampled_from(["zero", "axis", "anywhere"]),
+    )
+
+
+CASES = _strategy()
+"""The property tests' hypothesis strategy over `random_case`."""

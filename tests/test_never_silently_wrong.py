@@ -13,17 +13,9 @@ from __future__ import annotations
 
 import pytest
 from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-from random_robots import outcome, random_case
+from random_robots import CASES as cases
+from random_robots import outcome
 
-cases = st.builds(
-    random_case,
-    seed=st.integers(0, 2**31),
-    noisy=st.booleans(),
-    n_joints=st.integers(3, 7),
-    convention=st.sampled_from(["dh", "mdh"]),
-    tool_kind=st.sampled_from(["zero", "axis", "anywhere"]),
-)
 SETTINGS = {
     "deadline": None,
     "derandomize": True,  # the same cases every run: CI does not flicker

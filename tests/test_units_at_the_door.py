@@ -15,8 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-from random_robots import random_case
+from random_robots import CASES as cases
 
 import casecal as cc
 from casecal.cli import main
@@ -293,14 +292,6 @@ def check_case(case, tmp_path) -> None:
     assert size.passed, size.text
 
 
-cases = st.builds(
-    random_case,
-    seed=st.integers(0, 2**31),
-    noisy=st.booleans(),
-    n_joints=st.integers(3, 7),
-    convention=st.sampled_from(["dh", "mdh"]),
-    tool_kind=st.sampled_from(["zero", "axis", "anywhere"]),
-)
 SETTINGS = {
     "deadline": None,
     "derandomize": True,
