@@ -38,7 +38,7 @@ from .audit import audit
 from .calibration import STATUS_MESSAGES, Calibration
 from .facts import gather, point_rms
 from .problem import Problem
-from .reference import frames_fitted
+from .reference import FALLBACK_NOTE, frame_parameters, frames_fitted
 from .rounds import LOSSES, Settings, fit_in_rounds
 from .scale import door, with_size_check
 from .solvers import SOLVERS
@@ -195,6 +195,9 @@ def identify(
         method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior, progress
     )
     reference = frames_fitted(make, start, names, settings, e0)
+    frames = frame_parameters(names)
+    if reference is start and frames and len(frames) < len(names):
+        start_note = f"{start_note} {FALLBACK_NOTE}".strip()
     e_before = point_rms(make(reference, names=names).point_residuals(np.zeros(len(names))))
     if method != "svd" and not bounds and not prior and reference is not start:
         # the fitted base is a start nearer the minimum. Not the tool or the reflectors:

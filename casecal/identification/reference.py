@@ -59,3 +59,10 @@ def frames_fitted(make, start: Robot, names, settings: Settings, e0: float) -> R
     if out.solver_status < 0:
         return start
     return out.robot
+
+
+FALLBACK_NOTE = (
+    "The frames alone could not be fitted to these data, so 'before' is the nominal robot "
+    "with its nominal frames (the instrument's placement counts in it)."
+)
+"""What the summary says when `frames_fitted` fell back to the start."""
