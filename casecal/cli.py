@@ -766,7 +766,7 @@ def build_parser() -> argparse.ArgumentParser:
         "pose count; noise; six-axis arms with Hayati's beta; optimal poses; calibrate until a "
         "target; relative measurements; compliance under gravity) and write "
         "casecal-report.pdf with every figure as PNG and every table as CSV into the "
-        "output folder. About 3 minutes on 2 idle cores (--quick: about 18 s); the first "
+        "output folder. About 3 minutes on 2 idle cores (--quick: about 50 s); the first "
         "run on a machine also compiles its kernels, about 25 s more.",
     )
     p.add_argument(
