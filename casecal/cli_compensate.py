@@ -43,6 +43,13 @@ def add_command(command) -> None:
         "giving where the base stands in it (measured, or a simulation); every error is "
         "corrected, base-like ones too",
     )
+    p.add_argument(
+        "--position-only",
+        action="store_true",
+        help="match the tool's position only, with the least joint motion (default for "
+        "arms of six or more joints: the whole pose). For a calibration from positions "
+        "alone, whose tool orientation may be blind",
+    )
     p.set_defaults(func=run)
 
 
@@ -56,7 +63,8 @@ def run(args: argparse.Namespace) -> None:
     nominal = cli.robot_for(args, args.nominal) if args.nominal else None
     df, label = read_table(args.targets, "targets file")
     q = read_joints(df, calibrated, label)
-    result = compensate(calibrated, q, nominal, frame=args.frame)
+    orientation = False if args.position_only else None
+    result = compensate(calibrated, q, nominal, frame=args.frame, orientation=orientation)
     columns = {}
     for i, joint in enumerate(calibrated.joints, start=1):
         scale, unit = (180 / np.pi, "deg") if joint.type == "R" else (1e3, "mm")

@@ -62,8 +62,8 @@ class Compensation:
         the pose difference justifies) and within the joint limits.
     position_error, orientation_error : ndarray, shape (N,)
         Where the calibrated robot's tool ends at the returned values, against the target,
-        m and rad (0 for an arm of fewer than six joints, where only the position is
-        matched); on a failed row, the error the uncorrected target leaves.
+        m and rad (0 where only the position is matched: fewer than six joints, or
+        ``orientation=False``); on a failed row, the error the uncorrected target leaves.
     reason : tuple of str
         Per row: "" when `ok`, else why not, in words and numbers ("near a singularity
         (axes of joints 4 and 6 0.4° apart): the correction would turn joint 4 by 41°
@@ -130,6 +130,7 @@ def compensate(
     nominal: Robot | None = None,
     max_iterations: int = 30,
     frame: str = "robot",
+    orientation: bool | None = None,
 ) -> Compensation:
     """Joint values that bring `calibrated` to where `nominal` would be at `q_targets`.
 
@@ -154,6 +155,11 @@ def compensate(
         frame, in the frame the calibration was measured in; for a user who measured where
         the base stands (or a simulation). Every error, base-like ones included, is then
         corrected.
+    orientation : bool, optional
+        Match the tool's orientation as well as its position; default: for arms of six
+        or more joints. Give False for a calibration from positions alone, whose tool
+        orientation may be blind (Notes): the position is then matched with the least
+        joint motion, and the orientation is left as the joints put it.
 
     Returns
     -------
@@ -161,7 +167,8 @@ def compensate(
 
     Notes
     -----
-    Arms of six or more joints match the full tool pose, fewer the position. Positions
+    Arms of six or more joints match the full tool pose (unless ``orientation=False``),
+    fewer the position. Positions
     are as good as the calibration; orientations only where its data could see them. From
     positions of one point per pose the tool's turn about that point is blind (a turn of
     the last joint about an axis through it, a last joint and the tool offset turned
@@ -192,7 +199,14 @@ def compensate(
     if frame == "instrument":
         X = np.eye(4)
     target = X @ nominal.fk(q_t)
-    rows = slice(None) if calibrated.dof >= 6 else slice(0, 3)
+    if orientation is None:
+        orientation = calibrated.dof >= 6
+    if orientation and calibrated.dof < 6:
+        raise CalibrationError(
+            f"robot {calibrated.name!r} has {calibrated.dof} joints: too few to set the "
+            "tool's orientation as well as its position; match the position only"
+        )
+    rows = slice(None) if orientation else slice(0, 3)
     found = solve(calibrated, q_t, target, rows, max_iterations, scale=nominal)
     ok, reason = _judge(calibrated, q_t, found, rows)
     q = np.where(ok[:, None], found.q, q_t)
@@ -201,9 +215,7 @@ def compensate(
         q=q,
         ok=ok,
         position_error=np.linalg.norm(e[:, :3], axis=1),
-        orientation_error=np.linalg.norm(e[:, 3:], axis=1)
-        if calibrated.dof >= 6
-        else np.zeros(len(q)),
+        orientation_error=np.linalg.norm(e[:, 3:], axis=1) if orientation else np.zeros(len(q)),
         reason=tuple(reason),
         frame=frame,
         registration=X,
