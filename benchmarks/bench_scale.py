@@ -156,8 +156,16 @@ def main():
     args = parser.parse_args()
     if args.child:
         return child(args.child, args.data)
-    folder = tempfile.mkdtemp(prefix="casecal-bench-scale-")
-    os.environ.setdefault("CASECAL_CACHE", str(Path(folder) / "kernels"))
+    # the data and this run's kernels go away with the run, however it ends
+    with tempfile.TemporaryDirectory(prefix="casecal-bench-scale-") as folder:
+        os.environ.setdefault("CASECAL_CACHE", str(Path(folder) / "kernels"))
+        _run(args, folder)
+        if not args.no_busy:
+            busy_ratio(args.repeat)
+
+
+def _run(args, folder: str) -> None:
+    """The pose-count table (module doc), its data and kernels in `folder`."""
     print("PUMA 560, sigma 0.02 mm, Gauss-Newton; each fit a new process (time: s, peak RSS: MiB)")
     print(
         f"{'poses':>9} | {'theta/a/d/alpha':>17} | {'all':>17} | {'numpy GN':>15} | ratio | "
@@ -187,8 +195,6 @@ def main():
         "fit without a compiler (CASECAL_BACKEND=numpy) / numpy (no target: the evaluation's"
         " target, <= 2x numpy at 1e4, is bench_jacobian.py's)"
     )
-    if not args.no_busy:
-        busy_ratio(args.repeat)
 
 
 if __name__ == "__main__":
