@@ -26,6 +26,7 @@ from .identification.analysis import observability
 from .identification.fit import DEFAULT_METHOD, METHODS, identify
 from .identification.validation import split, validate
 from .model.catalog import load_deviations, load_robot, nominal_of, robots
+from .model.names import is_path, namesake_note, path_text
 from .model.parameters import unit
 
 _LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
@@ -256,8 +257,11 @@ def _robot_text(args: argparse.Namespace, robot) -> str:
     from .model.save import export
 
     origin = args.robot
-    if Path(origin).is_file():  # a path relative to the output's folder, as loading reads it
-        origin = os.path.relpath(Path(origin).resolve(), Path(args.output).resolve().parent)
+    if is_path(origin) and Path(origin).is_file():  # relative to the output's folder, as
+        # loading reads it; './arm', never 'arm' (a catalog name)
+        origin = path_text(
+            os.path.relpath(Path(origin).resolve(), Path(args.output).resolve().parent)
+        )
     out = export(dataclasses.replace(robot, calibrated_from=origin, auto_beta=False), args.output)
     for note in out.notes:  # the file read back and checked: what it loses is a warning
         kind = "casecal: warning" if note == out.statement else "note"
@@ -403,7 +407,7 @@ def _cmd_observability(args: argparse.Namespace) -> None:
 def _cmd_robots(args: argparse.Namespace) -> None:
     rows = []
     for name in robots():
-        robot = robot_for(args, name)
+        robot = load_robot(name)  # no note about namesakes here: nobody typed the name
         source = robot.source[0] if robot.source else ""
         rows.append(
             (name, str(robot.dof), robot.joint_types, robot.convention, robot.full_name, source)
@@ -439,6 +443,9 @@ def _show_urdf(robot, deg: float, mm: float) -> None:
 
 def robot_for(args: argparse.Namespace, name: str):
     """`load_robot(name)`, with --base-link and --tip-link for a URDF file."""
+    note = namesake_note(name)  # a catalog name wins over a file named alike: say so
+    if note:
+        print(f"casecal: note: {note}", file=sys.stderr)
     if str(name).lower().endswith((".urdf", ".xacro")):
         ends = {k: getattr(args, k, None) for k in ("base_link", "tip_link")}
         return load_robot(name, **ends)

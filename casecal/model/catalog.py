@@ -28,14 +28,13 @@ Every mistake raises `CalibrationError` naming the file, the key and the fix.
 
 from __future__ import annotations
 
-import difflib
 import math
 import tomllib
-from importlib import resources
 from pathlib import Path
 
 from ..errors import CalibrationError
 from ..textio import read_text
+from .names import catalog_entry, is_path, missing_file, path_text, robots
 from .robot import Frame, Joint, Robot
 from .terms_toml import TOP_KEYS, add_terms, inertial_lines, split_rows, terms_lines
 
@@ -62,47 +61,7 @@ _JOINT_KEYS = {"type", "a", "alpha", "d", "theta", "beta", "limits"}
 _FRAME_KEYS = {"xyz", "rpy"}
 
 
-ROBOT_SUFFIXES = (".toml", ".urdf", ".xacro", ".yaml", ".yml")
-"""A robot named with one of these is a path, never a catalog name."""
-
 _FLAGS = {"base_link": "--base-link", "tip_link": "--tip-link"}
-
-
-def missing_file(path: Path) -> str:
-    """The message for a robot file that does not exist: what the folder holds instead."""
-    folder = path.parent
-    where = "the current folder" if str(folder) in ("", ".") else f"folder {str(folder)!r}"
-    if not folder.is_dir():
-        return f"no file {str(path)!r}: {where} does not exist; check the path"
-    try:
-        files = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in ROBOT_SUFFIXES)
-    except OSError:
-        files = []
-    stems = {Path(f).stem.lower(): f for f in files}  # the suffix alone is no likeness
-    close = [stems[c] for c in difflib.get_close_matches(path.stem.lower(), stems, n=3)]
-    if close:
-        found = f"; did you mean {' or '.join(close)}?"
-    elif files:
-        shown = ", ".join(files[:8]) + (f" … ({len(files)} in all)" if len(files) > 8 else "")
-        found = f"; robot files there: {shown}"
-    else:
-        found = f"; {where} holds no robot file ({', '.join(ROBOT_SUFFIXES)})"
-    return f"no file {str(path)!r}: it does not exist in {where}{found}"
-
-
-def _catalog_dir():
-    return resources.files("casecal.model") / "robots"
-
-
-def robots() -> list[str]:
-    """Names of the robots in the catalog, sorted.
-
-    Returns
-    -------
-    list of str
-        Each loads with ``casecal.load_robot(name)``.
-    """
-    return sorted(p.name[:-5] for p in _catalog_dir().iterdir() if p.name.endswith(".toml"))
 
 
 def load_robot(
@@ -118,7 +77,10 @@ def load_robot(
     name_or_path : str or path
         A catalog name (see `robots`), the path of a robot file (schema in the module doc),
         of a ``.urdf`` (or ``.xacro``, with the xacro extra) file, or of a UR
-        ``kinematics:`` file (``.yaml``, `casecal.model.ur_kinematics`).
+        ``kinematics:`` file (``.yaml``, `casecal.model.ur_kinematics`). A string with no
+        slash and no suffix is a catalog name only, whatever files the working folder
+        holds (``"./arm"`` loads a file named ``arm``); a `pathlib.Path` is always a path
+        (rules in `casecal.model.names`).
     base_link, tip_link : str, optional
         URDF only: the chain's ends (defaults in `casecal.model.urdf.read_urdf`).
     packages : dict of str to str, optional
@@ -135,14 +97,34 @@ def load_robot(
         Unknown name, missing file, or a malformed file (the message names file and key).
     """
     text = str(name_or_path)
-    path = Path(text)
-    suffix = path.suffix.lower()
-    if suffix in ROBOT_SUFFIXES and text != "-" and not path.exists():
-        raise CalibrationError(missing_file(path))
-    if suffix in (".urdf", ".xacro"):
-        from .urdf import load_urdf
+    if not is_path(name_or_path):
+        entry = catalog_entry(text)
+        _no_ends(text, base_link, tip_link, packages)
+        label, source, stem = f"catalog robot {text}", read_text(entry, "robot file"), text
+    else:
+        path = Path(text)
+        suffix = path.suffix.lower()
+        if text != "-" and not path.exists():
+            raise CalibrationError(missing_file(path))
+        if suffix in (".urdf", ".xacro"):
+            from .urdf import load_urdf
 
-        return load_urdf(path, base_link, tip_link, packages)
+            return load_urdf(path, base_link, tip_link, packages)
+        _no_ends(text, base_link, tip_link, packages)
+        if suffix in (".yaml", ".yml"):
+            from .ur_kinematics import read_ur_kinematics
+
+            return read_ur_kinematics(read_text(path, "UR kinematics file"), text, path.stem)
+        label, source, stem = text, read_text(path, "robot file"), path.stem
+    try:
+        data = tomllib.loads(source)
+    except tomllib.TOMLDecodeError as exc:
+        raise CalibrationError(f"{label}: not valid TOML ({exc}); fix the syntax") from None
+    return robot_from_dict(data, label=label, default_name=stem)
+
+
+def _no_ends(text: str, base_link, tip_link, packages) -> None:
+    """Refuse the URDF-only arguments for a robot that is not a URDF or xacro file."""
     if base_link is not None or tip_link is not None or packages is not None:
         given = [k for k, v in (("base_link", base_link), ("tip_link", tip_link)) if v]
         flags = f" ({', '.join(_FLAGS[k] for k in given)} on the command line)" if given else ""
@@ -152,28 +134,6 @@ def load_robot(
             "and xacro robots only, and "
             f"{text!r} is not one; leave them out"
         )
-    if suffix in (".yaml", ".yml"):
-        from .ur_kinematics import read_ur_kinematics
-
-        return read_ur_kinematics(read_text(path, "UR kinematics file"), str(path), path.stem)
-    if suffix == ".toml" or path.exists() or "/" in text or "\\" in text:
-        label, source = str(path), read_text(path, "robot file")
-    else:
-        entry = _catalog_dir() / f"{text}.toml"
-        if not entry.is_file():
-            close = difflib.get_close_matches(text, robots(), n=3)
-            maybe = f"did you mean {' or '.join(close)}? " if close else ""
-            raise CalibrationError(
-                f"unknown robot {text!r}: no catalog robot and no file of that name; "
-                f"{maybe}catalog robots are: {', '.join(robots())} (or give the path of a "
-                f"robot file: {', '.join(ROBOT_SUFFIXES)})"
-            )
-        label, source = f"catalog robot {text}", read_text(entry, "robot file")
-    try:
-        data = tomllib.loads(source)
-    except tomllib.TOMLDecodeError as exc:
-        raise CalibrationError(f"{label}: not valid TOML ({exc}); fix the syntax") from None
-    return robot_from_dict(data, label=label, default_name=path.stem)
 
 
 def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot") -> Robot:
@@ -257,9 +217,12 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     if not isinstance(calibrated_from, str):
         raise CalibrationError(f"{label}: calibrated_from must be a robot name or path string")
     # a relative path is relative to this file's folder (identify writes it so)
+    # (a catalog name stays a name whatever files lie beside: the rule of load_robot)
     beside = Path(label).parent / calibrated_from
-    if calibrated_from and not Path(calibrated_from).is_absolute() and beside.is_file():
-        calibrated_from = str(beside)
+    named = calibrated_from and not is_path(calibrated_from) and calibrated_from in robots()
+    if calibrated_from and not named and not Path(calibrated_from).is_absolute():
+        if beside.is_file():
+            calibrated_from = path_text(beside)
     chain = data.get("calibrated_chain", [])
     if not (
         isinstance(chain, list) and len(chain) in (0, 2) and all(isinstance(c, str) for c in chain)
