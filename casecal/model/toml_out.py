@@ -1,0 +1,67 @@
+"""Robot files written: `robot_to_toml`, the schema `casecal.model.catalog` reads."""
+
+from __future__ import annotations
+
+from .robot import Robot
+from .terms_toml import inertial_lines, terms_lines
+
+
+def robot_to_toml(robot: Robot) -> str:
+    """Write `robot` as a robot file (m, rad, full precision) that `load_robot` reads back."""
+    lines = [f"name = {_q(robot.name)}"]
+    if robot.full_name:
+        lines.append(f"full_name = {_q(robot.full_name)}")
+    lines += [f"convention = {_q(robot.convention)}", 'length_unit = "m"', 'angle_unit = "rad"']
+    if robot.source:
+        lines.append("source = [" + ", ".join(_q(s) for s in robot.source) + "]")
+    if robot.confidence:
+        lines.append(f"confidence = {_q(robot.confidence)}")
+    if robot.calibrated_from:
+        lines.append(f"calibrated_from = {_q(robot.calibrated_from)}")
+        chain = robot.calibrated_chain or (
+            (robot.urdf.base_link, robot.urdf.tip_link) if robot.urdf is not None else ()
+        )
+        if chain:
+            lines.append(f"calibrated_chain = [{_q(chain[0])}, {_q(chain[1])}]")
+    for i, j in enumerate(robot.joints):
+        if robot.convention == "urdf":
+            from .urdf_toml import joint_to_lines
+
+            lines += ["", "[[joints]]", *joint_to_lines(j, _q), *inertial_lines(robot, i)]
+            continue
+        lines += [
+            "",
+            "[[joints]]",
+            f"type = {_q(j.type)}",
+            f"a = {float(j.a)!r}",
+            f"alpha = {float(j.alpha)!r}",
+            f"d = {float(j.d)!r}",
+            f"theta = {float(j.theta)!r}",
+        ]
+        if j.beta is not None:
+            lines.append(f"beta = {float(j.beta)!r}")
+        if j.limits is not None:
+            lines.append(f"limits = [{float(j.limits[0])!r}, {float(j.limits[1])!r}]")
+        lines += inertial_lines(robot, i)
+    if robot.points:
+        rows = ", ".join("[" + ", ".join(repr(float(v)) for v in p) + "]" for p in robot.points)
+        lines.insert(lines.index('angle_unit = "rad"') + 1, f"points = [{rows}]")
+    for key, frame in (("base", robot.base), ("tool", robot.tool)):
+        lines += [
+            "",
+            f"[{key}]",
+            f"xyz = [{', '.join(repr(float(v)) for v in frame.xyz)}]",
+            f"rpy = [{', '.join(repr(float(v)) for v in frame.rpy)}]",
+        ]
+    extra = terms_lines(robot)
+    top = 0  # top-level keys (gravity, inputs, payload_com) go before the first table
+    while top < len(extra) and extra[top]:
+        top += 1
+    at = lines.index('angle_unit = "rad"') + 1
+    lines[at:at] = extra[:top]
+    return "\n".join(lines + extra[top:]) + "\n"
+
+
+def _q(text: str) -> str:
+    escaped = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    return f'"{escaped}"'
