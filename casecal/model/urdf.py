@@ -19,8 +19,7 @@ import numpy as np
 
 from ..errors import CalibrationError
 from .frames import matrix_from_rpy, rpy_from_matrix
-
-MOVABLE = {"revolute": "R", "continuous": "R", "prismatic": "P"}
+from .urdf_tree import MOVABLE, chain_path, check_tree
 
 
 @dataclass(frozen=True)
@@ -142,37 +141,28 @@ def _numbers(text: str | None, n: int, what: str, label: str) -> tuple[float, ..
     try:
         values = tuple(float(v) for v in text.split())
     except ValueError:
-        raise CalibrationError(f"{label}: {what} {text!r} is not {n} numbers") from None
+        wanted = "a number" if n == 1 else f"{n} numbers"
+        raise CalibrationError(f"{label}: {what} {text!r} is not {wanted}") from None
     if len(values) != n or not all(math.isfinite(v) for v in values):
-        raise CalibrationError(f"{label}: {what} {text!r} is not {n} finite numbers")
+        wanted = "a finite number" if n == 1 else f"{n} finite numbers"
+        raise CalibrationError(f"{label}: {what} {text!r} is not {wanted}")
     return values
 
 
 def _read_joint(el: ET.Element, label: str) -> _Joint:
-    name = el.get("name") or "?"
+    name = el.get("name")
+    parent, child = el.find("parent"), el.find("child")
+    if not name:
+        below = "" if child is None else f" (child link {child.get('link')!r})"
+        raise CalibrationError(f'{label}: a <joint>{below} has no name=; give it name="..."')
     where = f"{label}, joint {name!r}"
     kind = el.get("type", "")
-    parent, child = el.find("parent"), el.find("child")
     if parent is None or child is None:
         raise CalibrationError(f"{where}: needs a <parent link=...> and a <child link=...>")
     origin = el.find("origin")
     xyz = _numbers(None if origin is None else origin.get("xyz"), 3, "origin xyz", where)
     rpy = _numbers(None if origin is None else origin.get("rpy"), 3, "origin rpy", where)
-    axis_el = el.find("axis")
-    axis = np.array(_numbers(None if axis_el is None else axis_el.get("xyz"), 3, "axis", where))
-    if axis_el is None:
-        axis = np.array([1.0, 0.0, 0.0])  # the URDF default
-    if kind in MOVABLE and np.linalg.norm(axis) == 0:
-        raise CalibrationError(f"{where}: axis is zero")
-    limits = None
-    limit = el.find("limit")
-    if kind in ("revolute", "prismatic"):
-        if limit is None or limit.get("lower") is None or limit.get("upper") is None:
-            raise CalibrationError(f"{where}: a {kind} joint needs <limit lower=... upper=...>")
-        limits = (
-            _numbers(limit.get("lower"), 1, "lower limit", where)[0],
-            _numbers(limit.get("upper"), 1, "upper limit", where)[0],
-        )
+    axis = _axis(el.find("axis"), kind, where)
     return _Joint(
         name,
         kind,
@@ -181,10 +171,46 @@ def _read_joint(el: ET.Element, label: str) -> _Joint:
         transform(xyz, rpy),
         xyz,
         rpy,
-        tuple(float(v) for v in axis / max(np.linalg.norm(axis), 1e-300)),
-        limits,
+        axis,
+        _limits(el.find("limit"), kind, where),
         _mimic(el.find("mimic"), where),
     )
+
+
+def _axis(el: ET.Element | None, kind: str, where: str) -> tuple[float, float, float]:
+    """The unit axis of a joint: (1, 0, 0) without <axis>, as the URDF spec says."""
+    if el is None:
+        return (1.0, 0.0, 0.0)
+    if kind not in MOVABLE:  # a fixed joint's axis moves nothing
+        return (1.0, 0.0, 0.0)
+    if el.get("xyz") is None:
+        raise CalibrationError(f'{where}: <axis> has no xyz=; write e.g. <axis xyz="0 0 1"/>')
+    axis = np.array(_numbers(el.get("xyz"), 3, "axis xyz", where))
+    norm = float(np.linalg.norm(axis))
+    if not norm > 1e-12:
+        raise CalibrationError(
+            f'{where}: axis xyz="{el.get("xyz")}" is zero; give the direction the joint '
+            'moves along, e.g. <axis xyz="0 0 1"/>'
+        )
+    return tuple(float(v) for v in axis / norm)
+
+
+def _limits(el: ET.Element | None, kind: str, where: str) -> tuple[float, float] | None:
+    """A revolute or prismatic joint's (lower, upper), rad or m; None for other kinds."""
+    if kind not in ("revolute", "prismatic"):
+        return None
+    if el is None or el.get("lower") is None or el.get("upper") is None:
+        raise CalibrationError(f"{where}: a {kind} joint needs <limit lower=... upper=...>")
+    lower = _numbers(el.get("lower"), 1, "lower limit", where)[0]
+    upper = _numbers(el.get("upper"), 1, "upper limit", where)[0]
+    if lower > upper:  # lower == upper is a joint held still, which URDF allows
+        scale, unit = (180 / math.pi, "deg") if kind == "revolute" else (1e3, "mm")
+        raise CalibrationError(
+            f'{where}: <limit lower="{el.get("lower")}" upper="{el.get("upper")}"> is '
+            f"{lower * scale:.6g} {unit} to {upper * scale:.6g} {unit}: lower must be below "
+            "upper; swap them"
+        )
+    return lower, upper
 
 
 def _mimic(el: ET.Element | None, where: str) -> tuple[str, float, float] | None:
@@ -195,55 +221,12 @@ def _mimic(el: ET.Element | None, where: str) -> tuple[str, float, float] | None
     return el.get("joint", ""), multiplier, offset
 
 
-def chain_path(joints: list[_Joint], base_link: str | None, tip_link: str | None, label: str):
-    """The joints from `base_link` to `tip_link` (defaults in `read_urdf`), in order."""
-    by_child = {j.child: j for j in joints}
-    children = {j.parent for j in joints} | {j.child for j in joints}
-    roots = sorted({j.parent for j in joints} - set(by_child))
-    if base_link is None:
-        if len(roots) != 1:
-            raise CalibrationError(
-                f"{label}: several root links ({', '.join(roots)}); give base_link= one of "
-                "them (--base-link on the command line)"
-            )
-        base_link = roots[0]
-    if base_link not in children:
-        raise CalibrationError(
-            f"{label}: no link {base_link!r}; links: {', '.join(sorted(children))}"
-        )
-
-    def path_to(link):
-        path = []
-        while link != base_link:
-            if link not in by_child:
-                return None
-            path.append(by_child[link])
-            link = path[-1].parent
-        return path[::-1]
-
-    if tip_link is None:
-        leaves = sorted({j.child for j in joints} - {j.parent for j in joints})
-        paths = {leaf: path_to(leaf) for leaf in leaves}
-        paths = {k: v for k, v in paths.items() if v is not None}
-        moving = {k: tuple(j.name for j in v if j.kind in MOVABLE) for k, v in paths.items()}
-        most = max((len(m) for m in moving.values()), default=0)
-        tips = [k for k, m in moving.items() if len(m) == most and most > 0]
-        if len({moving[k] for k in tips}) == 1 and "tool0" in tips:
-            tips = ["tool0"]
-        if len(tips) != 1:
-            raise CalibrationError(
-                f"{label}: more than one chain ends here; give tip_link= one of "
-                f"{', '.join(tips) or '(no movable chain found)'} (--tip-link on the command line)"
-            )
-        tip_link = tips[0]
-    path = path_to(tip_link)
-    if path is None:
-        raise CalibrationError(f"{label}: link {tip_link!r} is not below {base_link!r}")
-    return path, base_link, tip_link
-
-
 def parse(text: str, label: str) -> tuple[ET.Element, list[_Joint]]:
-    """The root element and the joints of URDF `text`."""
+    """The root element and the joints of URDF `text`, checked to make a tree."""
+    if not text.strip():
+        raise CalibrationError(
+            f"{label}: the file is empty; a URDF is an XML file with a <robot> element"
+        )
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
@@ -253,9 +236,15 @@ def parse(text: str, label: str) -> tuple[ET.Element, list[_Joint]]:
             el.tag = el.tag.split("}", 1)[1]
     if root.tag != "robot":
         raise CalibrationError(f"{label}: the root element is <{root.tag}>, not <robot>")
-    return root, [
-        _read_joint(el, label) for el in root.iter("joint") if el.find("parent") is not None
+    # every <joint> of the robot; elsewhere (a <transmission>'s) only those with a parent
+    top = set(root.findall("joint"))
+    joints = [
+        _read_joint(el, label)
+        for el in root.iter("joint")
+        if el in top or el.find("parent") is not None
     ]
+    check_tree(root, joints, label)
+    return root, joints
 
 
 def read_urdf(
@@ -378,43 +367,9 @@ def load_urdf(
     from ..textio import read_text
 
     if path.suffix == ".xacro" or path.name.endswith(".urdf.xacro"):
-        text = _expand_xacro(path, packages or {})
+        from .urdf_xacro import expand_xacro
+
+        text = expand_xacro(path, packages or {})
     else:
         text = read_text(path, "URDF file")
     return read_urdf(text, str(path), base_link, tip_link)
-
-
-def _expand_xacro(path: Path, packages: dict[str, str]) -> str:
-    """The URDF text of a xacro file, by xacrodoc (which resolves ROS packages without a
-    ROS install), else by the xacro package."""
-    if not path.is_file():
-        raise CalibrationError(f"{path}: no such file")
-    try:
-        from xacrodoc import XacroDoc
-        from xacrodoc import packages as known
-
-        def expand() -> str:
-            known.walk_up_from(str(path))
-            known.update_package_cache(dict(packages))
-            return XacroDoc.from_file(str(path)).to_urdf_string()
-
-    except ImportError:
-        try:
-            import xacro
-        except ImportError:
-            raise CalibrationError(
-                f"{path}: a .xacro file needs the urdf extra: pip install 'casecal[urdf]'"
-            ) from None
-
-        def expand() -> str:
-            return xacro.process_file(str(path)).toxml()
-
-    try:
-        return expand()
-    except Exception as exc:  # xacro raises its own and many builtin types
-        detail = " ".join(str(exc).split())
-        raise CalibrationError(
-            f"{path}: xacro could not expand it ({detail}); name the ROS packages it "
-            "finds with packages={name: folder} (Python: load_robot), or run 'xacro FILE > "
-            "robot.urdf' in its workspace and load the .urdf (the command line's way)"
-        ) from None
