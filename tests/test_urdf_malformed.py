@@ -8,7 +8,6 @@ a regression fails instead of hanging the suite.
 
 from __future__ import annotations
 
-import math
 import resource
 import signal
 import subprocess
@@ -255,4 +254,3 @@ def test_equal_limits_are_a_locked_joint_not_an_error(tmp_path):
     (tmp_path / "eq.urdf").write_text(_limits("0.5", "0.5"))
     robot = cc.load_robot(tmp_path / "eq.urdf")
     assert robot.joints[1].limits == (0.5, 0.5)
-    assert math.isclose(robot.joints[1].limits[0], 0.5)
