@@ -193,11 +193,15 @@ def _write_through(target: Path, text: str) -> None:
 
 def _stage(target: Path, text: str) -> str:
     """`text` in a temporary file beside `target`, with a new file's mode; its path."""
-    fd, tmp = tempfile.mkstemp(
-        prefix=f".{target.name}.casecal-{os.getpid()}-",
-        suffix=".tmp",
-        dir=target.parent or Path("."),
-    )
+    try:
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{target.name}.casecal-{os.getpid()}-",
+            suffix=".tmp",
+            dir=target.parent or Path("."),
+        )
+    except OSError as exc:  # a folder not writable: name the file the user gave
+        exc.filename = str(target)
+        raise
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
