@@ -172,16 +172,17 @@ def test_simulate_writes_into_a_fifo(tmp_path, capsys, via_link):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"pipe", target.name})
 
 
-def test_simulate_to_dev_null_leaves_it_a_device(tmp_path, capsys):
-    null = Path("/dev/null")
+@pytest.mark.parametrize("device", ["/dev/null", "/dev/zero"])
+def test_simulate_to_dev_null_leaves_it_a_device(tmp_path, capsys, device):
+    null = Path(device)
     if not stat.S_ISCHR(os.stat(null).st_mode) or not os.access(null, os.W_OK):
-        pytest.skip("no writable /dev/null here")
+        pytest.skip(f"no writable character device {device} here")
     with _fifo_reader(tmp_path / "guard") as taken:  # never risk /dev/null if FIFOs fail
         assert main(["simulate", "rr", "--poses", "2", "-o", str(tmp_path / "guard")]) == 0
         assert stat.S_ISFIFO(os.lstat(tmp_path / "guard").st_mode) and taken()
     assert main(["simulate", "rr", "--poses", "2", "-o", str(null)]) == 0
     assert stat.S_ISCHR(os.lstat(null).st_mode)
-    assert not [p for p in Path("/dev").iterdir() if p.name.startswith(".null.")]
+    assert not [p for p in Path("/dev").iterdir() if p.name.startswith(f".{null.name}.")]
 
 
 def test_report_refuses_a_fifo(tmp_path, fake_report, capsys):
