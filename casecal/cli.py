@@ -28,6 +28,7 @@ from .identification.validation import split, validate
 from .model.catalog import load_deviations, load_robot, nominal_of, robots
 from .model.names import is_path, namesake_note, path_text
 from .model.parameters import unit
+from .textio import recording
 
 _LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
 
@@ -70,7 +71,6 @@ def _cmd_simulate(args: argparse.Namespace) -> None:
     q = _schedule(robot, args)
     meas = simulate(true, q, noise=parse_length(args.noise), seed=args.seed)
     write_csv(args.output, meas, robot)
-    WRITTEN.append(str(args.output))
     shift = np.linalg.norm(meas.positions - robot.position(q), axis=1)
     print(f"wrote {meas.n_poses} poses of {robot.name} ({args.schedule} schedule) to {args.output}")
     print(
@@ -238,7 +238,6 @@ def _write_calibrated(args: argparse.Namespace, robot) -> None:
     """Write -o's calibrated robot file, recording which nominal it came from."""
     if args.output:
         write_atomic(args.output, _robot_text(args, robot))
-        WRITTEN.append(str(args.output))
         print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
 
 
@@ -277,8 +276,7 @@ def _write_outputs(args: argparse.Namespace, cal) -> None:
         files.append((args.deviations_out, _deviations_text(cal, args.deviations_out)))
     if args.output:
         files.append((args.output, _robot_text(args, cal.robot)))
-    write_together(files)
-    WRITTEN.extend(str(path) for path, _ in files)
+    write_together(files)  # each file recorded as its rename is done, for Ctrl-C's line
     if args.output:
         print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
     if args.deviations_out:
@@ -777,7 +775,14 @@ def build_parser() -> argparse.ArgumentParser:
         "run on a machine also compiles its kernels, about 25 s more.",
     )
     p.add_argument(
-        "-o", "--output", default="reports", metavar="DIR", help="output folder (default reports/)"
+        "-o",
+        "--output",
+        default="reports",
+        metavar="DIR",
+        help="output folder (default reports/). Only files an earlier report wrote there "
+        "(listed in its hidden .casecal-report) are replaced; every other file is kept, and "
+        "a file of yours with a name the report writes stops the report instead of being "
+        "overwritten",
     )
     p.add_argument("--quick", action="store_true", help="smaller grids: fewer poses and trials")
     p.add_argument(
@@ -808,26 +813,23 @@ def main(argv: list[str] | None = None) -> int:
     level = {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG)
     logging.basicConfig(level=level, format="casecal: %(levelname)s: %(message)s")
     warnings.showwarning = _one_line_warning
-    try:
-        args.func(args)
-    except CalibrationError as exc:
-        print(f"casecal: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        written = ", ".join(WRITTEN) if WRITTEN else "nothing was written"
-        print(f"casecal: interrupted; {written}", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # e.g. `casecal robots | head`
-        return 0
-    except OSError as exc:  # the system refused a read or write the library did not foresee
-        where = f" {exc.filename!r}" if exc.filename else ""
-        print(f"casecal: error:{where} {exc.strerror or exc}", file=sys.stderr)
-        return 2
+    with recording() as written:  # filled as each file is put in place, not after
+        try:
+            args.func(args)
+        except CalibrationError as exc:
+            print(f"casecal: error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            done = f"written: {', '.join(written)}" if written else "nothing was written"
+            print(f"casecal: interrupted; {done}", file=sys.stderr)
+            return 130
+        except BrokenPipeError:  # e.g. `casecal robots | head`
+            return 0
+        except OSError as exc:  # the system refused a read or write the library did not foresee
+            where = f" {exc.filename!r}" if exc.filename else ""
+            print(f"casecal: error:{where} {exc.strerror or exc}", file=sys.stderr)
+            return 2
     return 0
-
-
-WRITTEN: list[str] = []
-"""Files this run has written, for the one line printed when it is interrupted."""
 
 
 if __name__ == "__main__":

@@ -78,7 +78,6 @@ def run(args: argparse.Namespace) -> None:
     buffer = io.StringIO()
     pd.DataFrame(columns).to_csv(buffer, index=False, float_format="%.17g")
     write_atomic(args.output, buffer.getvalue())
-    cli.WRITTEN.append(str(args.output))
     bad = int((~result.ok).sum())
     print(
         f"wrote {len(q)} corrected targets to {args.output}"

@@ -7,9 +7,14 @@ writes through symbolic links. Every failure is one `CalibrationError` line.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import re
+import signal
+import stat
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 from .errors import CalibrationError
@@ -49,11 +54,18 @@ def write_atomic(path, text: str) -> None:
 def write_together(files) -> None:
     """Write several files so that a failure or a kill leaves no half-written one.
 
-    Each text goes to a temporary file beside its target first; only when all are
-    written are they renamed into place, in the order given (put the authoritative file
-    last). A failure while writing (a full disk, a folder that is not writable) changes
-    no target. Files get the mode a new file gets under the user's umask, and a target
-    that is a symbolic link is written through: the file it points to is replaced.
+    Each text goes to a temporary file beside its target first
+    (``.NAME.casecal-<pid>-XXXXXXXX.tmp``); only when all are written are they renamed into
+    place, in the order given (put the authoritative file last). A failure while writing
+    (a full disk, a folder that is not writable) changes no target. Files get the mode a
+    new file gets under the user's umask, and a target that is a symbolic link is written
+    through: the file it points to is replaced. A character device or a FIFO (``/dev/null``,
+    ``/dev/stdout``, a named pipe, or a link to one) is written into, as the shell's ``>``
+    does, never replaced. Temporary files that killed runs left beside a target are removed
+    (only names of the pattern above whose process no longer runs).
+
+    Each file is recorded (see `recording`) the moment its rename is done, so an
+    interrupt can say truly what was written.
 
     Parameters
     ----------
@@ -62,24 +74,88 @@ def write_together(files) -> None:
     Raises
     ------
     CalibrationError
-        An empty name, a folder, or a write the system refused (with its reason).
+        An empty name, a folder, a block device or socket, or a write the system refused
+        (naming the file and the reason).
     """
     staged, renamed = [], []
     try:
-        for path, text in files:
-            target = _target(path)
-            staged.append((_stage(target, text), target))
+        targets = [(_target(path), text) for path, text in files]
+        for target, text in targets:
+            if not _special(target):
+                _sweep(target)
+                staged.append((_stage(target, text), target))
+        for target, text in targets:
+            if _special(target):
+                _write_through(target, text)
+                _done(renamed, target)
         for tmp, target in staged:
-            os.replace(tmp, target)
-            renamed.append(str(target))
+            with held_signals():  # a Ctrl-C lands after the rename is recorded, not between
+                os.replace(tmp, target)
+                _done(renamed, target)
     except OSError as exc:
         done = f"; written: {', '.join(renamed)}" if renamed else "; no file was changed"
-        raise CalibrationError(
-            f"cannot write {str(exc.filename or '')!r}: {exc.strerror}{done}"
-        ) from None
+        name = exc.filename if exc.filename else ""
+        raise CalibrationError(f"cannot write {str(name)!r}: {exc.strerror or exc}{done}") from None
     finally:
         for tmp, _ in staged:
             Path(tmp).unlink(missing_ok=True)
+
+
+_RECORD: list[list[str]] = []
+
+
+@contextlib.contextmanager
+def recording():
+    """Collect the paths every write in this block puts in place, as it happens.
+
+    The command line uses it to say, when interrupted, which files were written.
+    """
+    written: list[str] = []
+    _RECORD.append(written)
+    try:
+        yield written
+    finally:
+        _RECORD.remove(written)
+
+
+def record(path) -> None:
+    """Note that `path` was written in place (for the innermost `recording` block)."""
+    if _RECORD:
+        _RECORD[-1].append(str(path))
+
+
+@contextlib.contextmanager
+def held_signals():
+    """Hold Ctrl-C and SIGTERM back until the block is done: an interrupt comes after
+    the block, never inside it. (Python handles signals in its main thread only, and
+    any thread may receive them, so the handlers are swapped, not the signal mask.)"""
+    held = (signal.SIGINT, signal.SIGTERM)
+    if threading.current_thread() is not threading.main_thread() or any(
+        signal.getsignal(n) is None
+        for n in held  # set outside Python: cannot be put back
+    ):
+        yield
+        return
+    caught: list[int] = []
+    previous = {}
+    for signum in held:
+        previous[signum] = signal.signal(signum, lambda n, _: caught.append(n))
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        for signum in caught:  # now as it would have been handled
+            handler = previous[signum]
+            if callable(handler):
+                handler(signum, None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(signum)
+
+
+def _done(renamed: list[str], target: Path) -> None:
+    renamed.append(str(target))
+    record(target)
 
 
 def _target(path) -> Path:
@@ -90,20 +166,78 @@ def _target(path) -> Path:
         path = path.resolve()  # write through the link, keep the link itself
     if path.is_dir():
         raise CalibrationError(f"{str(path)!r} is a folder; give a file name")
+    if path.exists() and not path.is_file() and not _special(path):
+        raise CalibrationError(
+            f"{str(path)!r} is a block device or a socket, not a file; give a file name"
+        )
     return path
+
+
+def _special(path: Path) -> bool:
+    """A character device or a FIFO: written into, never renamed over."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
+
+
+def _write_through(target: Path, text: str) -> None:
+    try:
+        with open(target, "w", encoding="utf-8") as fh:  # a FIFO waits for its reader
+            fh.write(text)
+    except OSError as exc:
+        exc.filename = str(target)
+        raise
 
 
 def _stage(target: Path, text: str) -> str:
     """`text` in a temporary file beside `target`, with a new file's mode; its path."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or Path("."))
+    try:
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{target.name}.casecal-{os.getpid()}-",
+            suffix=".tmp",
+            dir=target.parent or Path("."),
+        )
+    except OSError as exc:  # a folder not writable: name the file the user gave
+        exc.filename = str(target)
+        raise
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
         os.chmod(tmp, 0o666 & ~_umask())
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        exc.filename = str(target)  # the file the user named, not our temporary one
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return tmp
+
+
+def _sweep(target: Path) -> None:
+    """Remove temporary files of `target` left by casecal runs that were killed."""
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.casecal-(\d+)-[A-Za-z0-9_]+\.tmp")
+    try:
+        names = os.listdir(target.parent or ".")
+    except OSError:
+        return
+    for name in names:
+        match = pattern.fullmatch(name)
+        if match and int(match[1]) != os.getpid() and not alive(int(match[1])):
+            Path(target.parent, name).unlink(missing_ok=True)
+
+
+def alive(pid: int) -> bool:
+    """Whether process `pid` runs (one we may not signal counts as running)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
 
 
 def _umask() -> int:

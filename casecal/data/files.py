@@ -243,6 +243,10 @@ def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]
             f"{label}: the file is empty; it needs a header and one row per pose"
         ) from None
     except (pd.errors.ParserError, ValueError) as exc:
+        if "on source failed" in str(exc):
+            # pandas turns a Ctrl-C that lands in its read of this in-memory text (which
+            # cannot fail otherwise) into this error: it is an interrupt, not a bad file
+            raise KeyboardInterrupt from None
         detail = " ".join(str(exc).split())  # pandas' messages span lines
         raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
     columns = [str(c).strip() for c in df.columns]

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from .common import StudyResult, style
-from .folder import building_folder, publish
+from .folder import building_folder, discard, publish
 from .pose_count import pose_count_sweep
 from .studies_beyond import enough_poses, optimal_poses, relative_measurements
 from .studies_compliance import compliance_study
@@ -113,6 +113,22 @@ def build_report(
     -------
     Path of the PDF.
     """
+    out = Path(out)
+    folder = building_folder(out)  # swapped in whole at the end (casecal.report.folder)
+    try:
+        n = _build(folder, quick, executor, workers, scheduler, progress, log)
+        publish(folder, out)
+    except BaseException:  # a failure, a full disk, Ctrl-C: no half-built folder is left
+        discard(folder)
+        raise
+    pdf = out / "casecal-report.pdf"
+    if log:
+        log(f"{n} figures; report written to {pdf}")
+    return pdf
+
+
+def _build(folder: Path, quick, executor, workers, scheduler, progress, log) -> int:
+    """Run the studies and write the PDF into `folder`; the number of figures."""
     import casadi
     import numpy
     import pandas
@@ -121,8 +137,6 @@ def build_report(
     from .. import __version__
     from .pdf import write_pdf
 
-    out = Path(out)
-    folder = building_folder(out)  # swapped in whole at the end (casecal.report.folder)
     t0 = time.perf_counter()
     with study_runner(executor, workers, scheduler, progress) as run:
         results = run_studies(list(STUDIES), folder, quick, run, log)
@@ -151,8 +165,4 @@ def build_report(
         "Monte Carlo trial, as CSV.",
     ]
     n = write_pdf(folder / "casecal-report.pdf", "casecal report", settings, results, PDF_TABLES)
-    publish(folder, out)
-    pdf = out / "casecal-report.pdf"
-    if log:
-        log(f"{n} figures; report written to {pdf}")
-    return pdf
+    return n

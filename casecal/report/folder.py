@@ -1,12 +1,29 @@
-"""Build the report beside its folder and swap it in whole.
+"""Build the report beside its folder and swap it in whole, never losing the user's files.
 
 A report killed halfway must not leave a truncated PDF in place of the old one, nor a
 folder that mixes new figures with an old PDF. So the report is built in a hidden folder
 next to the target (``.reports.building-<pid>``) and swapped in at the end: on Linux with
 one atomic ``renameat2(RENAME_EXCHANGE)``, elsewhere with two renames. After a kill at any
-moment the target holds the old report or the new one, whole. Files in the target that the
-report does not make (a README, the user's own notes) are carried over; build folders of
-killed runs are removed by the next one.
+moment the target holds the old report or the new one, whole. Build folders of killed
+runs are removed by the next one, and so is the build folder of a run that fails.
+
+What the report may replace or remove: only what it wrote. Each report lists the names it
+wrote in a hidden file ``.casecal-report`` in its folder. When a new report is published:
+
+- the files the last report listed are replaced by the new ones, or dropped if the new
+  report no longer makes them;
+- everything else in the folder (a README, the user's ``thesis.pdf``, a tracker export,
+  sub-folders) is carried over untouched (hard-linked into the new folder, copied where
+  links are impossible);
+- a file the last report did not list but whose name the new report writes is never
+  overwritten: the report is refused, saying which file to move. A folder written by a
+  casecal from before these lists (it holds ``casecal-report.pdf`` but no
+  ``.casecal-report``) counts as a report folder: files with the names the new report
+  writes are replaced, every other file is kept.
+
+The output may be a new folder, an empty one, a report folder, a folder of the user's
+files, or a symbolic link to a folder (the folder it points to is written); anything
+else (a file, a device, a FIFO) is refused.
 """
 
 from __future__ import annotations
@@ -15,42 +32,127 @@ import ctypes
 import ctypes.util
 import os
 import shutil
+import stat
 from pathlib import Path
 
-REPORT_SUFFIXES = {".pdf", ".png", ".csv"}
-"""What a report writes; anything else in the target folder is the user's and is kept."""
+from ..errors import CalibrationError
+from ..textio import alive, held_signals, record
+
+MANIFEST = ".casecal-report"
+"""The hidden file listing, one name a line, what the report in this folder wrote."""
+
+PDF = "casecal-report.pdf"
 
 
 def building_folder(out: Path) -> Path:
-    """A new, empty folder beside `out` to build the report in (stale ones removed)."""
-    out = Path(out)
+    """A new, empty folder beside `out` to build the report in (stale ones removed).
+
+    Refuses, before any work, an `out` that is not a folder, or that holds a
+    ``casecal-report.pdf`` the report did not write.
+    """
+    out = _resolved(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     _sweep(out)
+    if out.exists():
+        _refuse_foreign(out, {PDF})
     folder = out.parent / f".{out.name}.building-{os.getpid()}"
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir()
     return folder
 
 
+def discard(folder: Path) -> None:
+    """Remove a build folder whose report failed or was interrupted."""
+    shutil.rmtree(folder, ignore_errors=True)
+
+
 def publish(folder: Path, out: Path) -> None:
-    """Make `folder` (a finished report) the content of `out`, at once."""
-    out = Path(out)
+    """Make `folder` (a finished report) the content of `out` at once, keeping the files
+    in `out` that no report wrote (see the module's text)."""
+    out = _resolved(out)
+    new = {p.name for p in Path(folder).iterdir()} - {MANIFEST}
+    (Path(folder) / MANIFEST).write_text("".join(f"{name}\n" for name in sorted(new)))
     if out.exists():
+        _refuse_foreign(out, new)
+        ours = _ours(out)
         for item in out.iterdir():
-            if item.suffix not in REPORT_SUFFIXES and not (folder / item.name).exists():
-                if item.is_dir():
-                    shutil.copytree(item, folder / item.name, symlinks=True)
-                else:
-                    shutil.copy2(item, folder / item.name)
-    if not out.exists():
-        os.rename(folder, out)
-    elif _exchange(folder, out):
-        shutil.rmtree(folder, ignore_errors=True)  # it now holds the old report
+            if item.name in new or item.name == MANIFEST or (ours and item.name in ours):
+                continue  # the old report's: replaced or dropped
+            _carry(item, Path(folder) / item.name)
+    with held_signals():  # a Ctrl-C after the swap still says the report was written
+        if not out.exists():
+            os.rename(folder, out)
+            folder = None
+        elif _exchange(folder, out):
+            pass  # `folder` now holds the old report
+        else:
+            old = out.parent / f".{out.name}.old-{os.getpid()}"
+            os.rename(out, old)
+            os.rename(folder, out)
+            folder = old
+        record(out)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _resolved(out) -> Path:
+    """`out`, or the folder a symbolic link `out` points to; refuses anything not a folder."""
+    out = Path(out)
+    if out.is_symlink():
+        out = out.resolve()
+    if out.exists() and not out.is_dir():
+        raise CalibrationError(
+            f"{str(out)!r} is not a folder (a file, a device or a FIFO); "
+            "give a new or existing folder with -o"
+        )
+    return out
+
+
+def _ours(out: Path) -> set[str] | None:
+    """Names the report in `out` wrote: its list; None for a report from before lists
+    (any name the new report writes); empty for a folder no report wrote."""
+    try:
+        text = (out / MANIFEST).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None if (out / PDF).is_file() else set()
+    except (OSError, UnicodeDecodeError):
+        return set()  # an unreadable list claims nothing
+    return {n for n in text.splitlines() if n and "/" not in n and n not in (".", "..")}
+
+
+def _refuse_foreign(out: Path, names) -> None:
+    ours = _ours(out)
+    if ours is None:
+        return
+    for name in sorted(names):
+        if name not in ours and os.path.lexists(out / name):
+            raise CalibrationError(
+                f"{str(out / name)!r} was not written by casecal, and the report writes a "
+                "file of that name; move that file, or give another folder with -o"
+            )
+
+
+def _carry(item: Path, to: Path) -> None:
+    """Put `item` (kept from the old folder) at `to` in the new one without copying
+    its bytes where a hard link can do."""
+    if item.is_symlink():
+        os.symlink(os.readlink(item), to)
+    elif item.is_dir():
+        shutil.copytree(item, to, symlinks=True, copy_function=_link)
     else:
-        old = out.parent / f".{out.name}.old-{os.getpid()}"
-        os.rename(out, old)
-        os.rename(folder, out)
-        shutil.rmtree(old, ignore_errors=True)
+        _link(item, to)
+
+
+def _link(src, dst) -> None:
+    try:
+        os.link(src, dst, follow_symlinks=False)
+    except OSError:
+        if not stat.S_ISREG(os.lstat(src).st_mode):  # reading a FIFO would wait forever
+            raise CalibrationError(
+                f"cannot keep {str(src)!r} (not a regular file) in the new report folder; "
+                "move it, or give another folder with -o"
+            ) from None
+        shutil.copy2(src, dst)
 
 
 def _exchange(a: Path, b: Path) -> bool:
@@ -73,20 +175,10 @@ def _sweep(out: Path) -> None:
             pid = int(folder.name.rsplit("-", 1)[1])
         except ValueError:
             continue
-        if pid == os.getpid() or not _alive(pid):
+        if pid == os.getpid() or not alive(pid):
             shutil.rmtree(folder, ignore_errors=True)
     for folder in out.parent.glob(f".{out.name}.old-*"):
         if out.exists():
             shutil.rmtree(folder, ignore_errors=True)
         else:  # killed between the two renames of the fallback: the old report comes back
             os.rename(folder, out)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True

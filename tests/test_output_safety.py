@@ -1,0 +1,303 @@
+"""Outputs never destroy what casecal did not write (issue 20, findings 1-4 and 15).
+
+A report folder keeps the user's files; ``-o`` onto a FIFO, a character device or a link
+to one writes into it instead of replacing it; the line printed on Ctrl-C names exactly
+the files already in place; temporary files of killed runs are swept; a full disk names
+the file and leaves no half-built report folder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import signal
+import stat
+from pathlib import Path
+from typing import ClassVar
+
+import pytest
+
+from casecal.cli import main
+
+USER_FILES = {
+    "tracker_export.csv": b"x,y,z\n1,2,3\n",
+    "thesis.pdf": b"%PDF-1.4 the user's thesis",
+    "setup_photo.png": b"\x89PNG user photo",
+    "README.md": b"notes\n",
+    "sub/notes.txt": b"deeper notes\n",
+}
+
+
+def _put(folder: Path, files: dict) -> None:
+    for name, data in files.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_bytes(data)
+
+
+def _assert_holds(folder: Path, files: dict) -> None:
+    for name, data in files.items():
+        assert (folder / name).read_bytes() == data, name
+
+
+@pytest.fixture
+def fake_report(monkeypatch):
+    """`casecal report` with the studies replaced by a few files written at once: the
+    folder handling is the real one. Set `.files` to choose what the next report writes;
+    `.fail` to an exception the studies raise."""
+    import casecal.report as rep
+    import casecal.report.pdf as pdf
+
+    class Fake:
+        files: ClassVar = {"fig1.png": b"new figure", "table1.csv": b"a,b\n1,2\n"}
+        fail = None
+
+    def run_studies(names, out, quick, run, log=None):
+        if Fake.fail is not None:
+            raise Fake.fail
+        _put(Path(out), Fake.files)
+        return []
+
+    monkeypatch.setattr(rep, "run_studies", run_studies)
+    monkeypatch.setattr(rep, "study_runner", lambda *a, **k: contextlib.nullcontext(None))
+    monkeypatch.setattr(pdf, "write_pdf", lambda path, *a: Path(path).write_bytes(b"new") and 0)
+    return Fake
+
+
+def test_report_keeps_the_users_files(tmp_path, fake_report, capsys):
+    out = tmp_path / "rep"
+    out.mkdir()
+    _put(out, USER_FILES)
+    assert main(["report", "-o", str(out)]) == 0, capsys.readouterr().err
+    _assert_holds(out, USER_FILES)
+    _assert_holds(out, fake_report.files)
+    assert (out / "casecal-report.pdf").read_bytes() == b"new"
+    # the next report drops what the last one wrote and no longer makes, nothing else
+    fake_report.files = {"fig1.png": b"newer figure"}
+    assert main(["report", "-o", str(out)]) == 0, capsys.readouterr().err
+    _assert_holds(out, USER_FILES)
+    _assert_holds(out, fake_report.files)
+    assert not (out / "table1.csv").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".rep.")]
+
+
+def test_report_never_overwrites_a_users_file_of_its_names(tmp_path, fake_report, capsys):
+    out = tmp_path / "rep"
+    out.mkdir()
+    mine = {"fig1.png": b"my own figure", "thesis.pdf": b"thesis"}
+    _put(out, mine)
+    assert main(["report", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("casecal: error: ") and err.count("\n") == 1
+    assert "fig1.png" in err and "not written by casecal" in err
+    _assert_holds(out, mine)
+    assert sorted(p.name for p in out.iterdir()) == sorted(mine)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".rep.")]
+
+
+def test_a_report_folder_from_before_lists_keeps_unknown_files(tmp_path, fake_report, capsys):
+    out = tmp_path / "rep"
+    out.mkdir()
+    _put(out, {"casecal-report.pdf": b"old", "fig1.png": b"old", "old_figure.png": b"old"})
+    _put(out, USER_FILES)
+    assert main(["report", "-o", str(out)]) == 0, capsys.readouterr().err
+    _assert_holds(out, USER_FILES)
+    _assert_holds(out, fake_report.files)
+    assert (out / "old_figure.png").read_bytes() == b"old"  # not provably ours: kept
+
+
+def test_report_through_a_link_to_a_folder(tmp_path, fake_report, capsys):
+    real = tmp_path / "real"
+    real.mkdir()
+    _put(real, {"thesis.pdf": b"thesis"})
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    assert main(["report", "-o", str(link)]) == 0, capsys.readouterr().err
+    assert link.is_symlink() and link.resolve() == real.resolve()
+    _assert_holds(real, {"thesis.pdf": b"thesis", **fake_report.files})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"]
+
+
+@pytest.mark.parametrize(
+    "failure",
+    [OSError(errno.ENOSPC, "No space left on device", "fig9.png"), KeyboardInterrupt()],
+)
+def test_a_failed_report_leaves_no_build_folder(tmp_path, fake_report, capsys, failure):
+    out = tmp_path / "rep"
+    out.mkdir()
+    _put(out, {"thesis.pdf": b"thesis"})
+    fake_report.fail = failure
+    code = main(["report", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == (130 if isinstance(failure, KeyboardInterrupt) else 2), err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]
+    _assert_holds(out, {"thesis.pdf": b"thesis"})
+
+
+@contextlib.contextmanager
+def _fifo_reader(path: Path):
+    """A FIFO at `path` held open for reading (O_RDWR: never blocks, whatever the
+    writer does); yields a function returning what was written into it so far."""
+    os.mkfifo(path)
+    fd = os.open(path, os.O_RDWR | os.O_NONBLOCK)
+
+    def taken() -> bytes:
+        data = b""
+        with contextlib.suppress(BlockingIOError):
+            while chunk := os.read(fd, 65536):
+                data += chunk
+        return data
+
+    try:
+        yield taken
+    finally:
+        os.close(fd)
+
+
+@pytest.mark.parametrize("via_link", [False, True])
+def test_simulate_writes_into_a_fifo(tmp_path, capsys, via_link):
+    fifo = tmp_path / "pipe"
+    with _fifo_reader(fifo) as taken:
+        target = fifo
+        if via_link:
+            target = tmp_path / "link"
+            target.symlink_to(fifo)
+        code = main(["simulate", "rr", "--poses", "3", "-o", str(target)])
+        assert code == 0, capsys.readouterr().err
+        assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+        assert taken().startswith(b"q1_deg,q2_deg,x_mm")
+    if via_link:
+        assert target.is_symlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"pipe", target.name})
+
+
+@pytest.mark.parametrize("device", ["/dev/null", "/dev/zero"])
+def test_simulate_to_dev_null_leaves_it_a_device(tmp_path, capsys, device):
+    null = Path(device)
+    if not stat.S_ISCHR(os.stat(null).st_mode) or not os.access(null, os.W_OK):
+        pytest.skip(f"no writable character device {device} here")
+    with _fifo_reader(tmp_path / "guard") as taken:  # never risk /dev/null if FIFOs fail
+        assert main(["simulate", "rr", "--poses", "2", "-o", str(tmp_path / "guard")]) == 0
+        assert stat.S_ISFIFO(os.lstat(tmp_path / "guard").st_mode) and taken()
+    assert main(["simulate", "rr", "--poses", "2", "-o", str(null)]) == 0
+    assert stat.S_ISCHR(os.lstat(null).st_mode)
+    assert not [p for p in Path("/dev").iterdir() if p.name.startswith(f".{null.name}.")]
+
+
+def test_report_refuses_a_fifo(tmp_path, fake_report, capsys):
+    fifo = tmp_path / "pipe"
+    with _fifo_reader(fifo):
+        assert main(["report", "-o", str(fifo)]) == 2
+        assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert capsys.readouterr().err.startswith("casecal: error: ")
+
+
+@pytest.fixture
+def measured(tmp_path):
+    csv = tmp_path / "m.csv"
+    assert main(["simulate", "rr", "--poses", "12", "-o", str(csv)]) == 0
+    return csv
+
+
+def _interrupt_after_rename_of(monkeypatch, name: str):
+    real = os.replace
+
+    def replace(src, dst, *args, **kwargs):
+        real(src, dst, *args, **kwargs)
+        if Path(dst).name == name:  # Ctrl-C the moment the rename is done
+            os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(os, "replace", replace)
+
+
+@pytest.mark.parametrize("last", ["out.toml", "dev.csv"])
+def test_ctrl_c_after_a_rename_names_what_is_in_place(
+    tmp_path, measured, monkeypatch, capsys, last
+):
+    out, dev = tmp_path / "out.toml", tmp_path / "dev.csv"
+    capsys.readouterr()
+    _interrupt_after_rename_of(monkeypatch, last)
+    argv = ["identify", "rr", str(measured), "--parameters", "a1", "-o", str(out)]
+    code = main([*argv, "--deviations-out", str(dev)])
+    err = capsys.readouterr().err
+    assert code == 130 and err.count("\n") == 1 and err.startswith("casecal: interrupted; ")
+    assert "nothing was written" not in err
+    assert str(dev) in err  # the deviations file is renamed first, the robot file last
+    assert (str(out) in err) == (last == "out.toml") == out.exists()
+    assert dev.exists()
+
+
+def test_ctrl_c_while_a_csv_is_parsed_is_an_interrupt(tmp_path, measured, monkeypatch, capsys):
+    import pandas as pd
+
+    import casecal.data.files as files
+
+    def interrupted(*args, **kwargs):
+        # what pandas raises when SIGINT lands in its read of the text (seen with a real
+        # Ctrl-C on a 100 MB file: see tests/test_kills.py for the real signal)
+        raise pd.errors.ParserError(
+            "Error tokenizing data. C error: Calling read(nbytes) on source failed. "
+            "Try engine='python'."
+        )
+
+    monkeypatch.setattr(files.pd, "read_csv", interrupted)
+    capsys.readouterr()
+    code = main(["identify", "rr", str(measured), "--parameters", "a1"])
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert err == "casecal: interrupted; nothing was written\n"
+
+
+def test_full_disk_names_the_file(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "out.csv"
+    out.write_text("old\n")
+
+    class FullDisk:
+        def __init__(self, fh):
+            self.fh = fh
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+        def write(self, text):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    real = os.fdopen
+    monkeypatch.setattr(os, "fdopen", lambda *a, **k: FullDisk(real(*a, **k)))
+    code = main(["simulate", "rr", "--poses", "3", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err == (
+        f"casecal: error: cannot write {str(out)!r}: No space left on device; no file was changed\n"
+    )
+    assert out.read_text() == "old\n" and os.listdir(tmp_path) == ["out.csv"]
+
+
+def test_temp_files_of_killed_runs_are_swept(tmp_path, capsys):
+    out = tmp_path / "sim.csv"
+    dead = _dead_pid()
+    stale = [tmp_path / f".sim.csv.casecal-{dead}-a1b2c3d4.tmp"]
+    others = [
+        tmp_path / f".sim.csv.casecal-{os.getppid()}-zz.tmp",  # a running process's
+        tmp_path / ".sim.csv.kq93jd",  # not our pattern (an older casecal, or the user's)
+        tmp_path / f".other.csv.casecal-{dead}-a1b2c3d4.tmp",  # another target's
+        tmp_path / f"sim.csv.casecal-{dead}-a1b2c3d4.tmp",  # not hidden: not ours
+    ]
+    for p in stale + others:
+        p.write_text("partial")
+    assert main(["simulate", "rr", "--poses", "3", "-o", str(out)]) == 0
+    assert not any(p.exists() for p in stale)
+    assert all(p.read_text() == "partial" for p in others)
+
+
+def _dead_pid() -> int:
+    """The pid of a process that has exited (and been reaped)."""
+    pid = os.fork()
+    if pid == 0:
+        os._exit(0)
+    os.waitpid(pid, 0)
+    return pid
