@@ -172,17 +172,25 @@ def test_simulate_writes_into_a_fifo(tmp_path, capsys, via_link):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"pipe", target.name})
 
 
-@pytest.mark.parametrize("device", ["/dev/null", "/dev/zero"])
-def test_simulate_to_dev_null_leaves_it_a_device(tmp_path, capsys, device):
-    null = Path(device)
-    if not stat.S_ISCHR(os.stat(null).st_mode) or not os.access(null, os.W_OK):
-        pytest.skip(f"no writable character device {device} here")
-    with _fifo_reader(tmp_path / "guard") as taken:  # never risk /dev/null if FIFOs fail
-        assert main(["simulate", "rr", "--poses", "2", "-o", str(tmp_path / "guard")]) == 0
-        assert stat.S_ISFIFO(os.lstat(tmp_path / "guard").st_mode) and taken()
-    assert main(["simulate", "rr", "--poses", "2", "-o", str(null)]) == 0
+@pytest.mark.parametrize("through_link", [False, True], ids=["device", "link to a device"])
+def test_simulate_to_a_character_device_leaves_it_a_device(tmp_path, capsys, through_link):
+    # a private twin of /dev/null (same major, minor), so that a regression can never
+    # replace the system's own: the finding was `simulate rr -o /dev/null` as root
+    null = tmp_path / "null"
+    try:
+        os.mknod(null, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+    except (PermissionError, AttributeError, OSError) as exc:
+        pytest.skip(f"cannot make a character device here ({exc}); the FIFO tests cover it")
+    target = null
+    if through_link:
+        target = tmp_path / "out.csv"
+        target.symlink_to(null)
+    assert main(["simulate", "rr", "--poses", "2", "-o", str(target)]) == 0
     assert stat.S_ISCHR(os.lstat(null).st_mode)
-    assert not [p for p in Path("/dev").iterdir() if p.name.startswith(f".{null.name}.")]
+    assert os.lstat(null).st_rdev == os.makedev(1, 3)
+    if through_link:
+        assert target.is_symlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"null", target.name})
 
 
 def test_report_refuses_a_fifo(tmp_path, fake_report, capsys):
