@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from . import __version__, cli_args
 from .data.files import read_csv, write_atomic, write_csv, write_together
 from .data.measurements import simulate
 from .design import poses
@@ -29,6 +29,8 @@ from .model.catalog import load_deviations, load_robot, nominal_of, robots
 from .model.parameters import unit
 
 _LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
+MAX_POSES = 10_000_000
+"""--poses above this is a typo, not a schedule (10 million poses of six joints: 4 GB)."""
 
 
 def parse_length(text: str) -> float:
@@ -68,10 +70,15 @@ def _cmd_simulate(args: argparse.Namespace) -> None:
     true = robot.with_deviations(deviations)
     q = _schedule(robot, args)
     meas = simulate(true, q, noise=parse_length(args.noise), seed=args.seed)
+    # every measured point of every pose (a robot may carry several reflectors)
+    shift = np.linalg.norm(meas.points - robot.measured_points(meas.q), axis=-1)
     write_csv(args.output, meas, robot)
     WRITTEN.append(str(args.output))
-    shift = np.linalg.norm(meas.positions - robot.position(q), axis=1)
-    print(f"wrote {meas.n_poses} poses of {robot.name} ({args.schedule} schedule) to {args.output}")
+    each = f", {shift.shape[1]} points each" if shift.shape[1] > 1 else ""
+    print(
+        f"wrote {meas.n_poses} poses{each} of {robot.name} ({args.schedule} schedule) "
+        f"to {args.output}"
+    )
     print(
         f"{len(deviations)} deviations, noise sigma {parse_length(args.noise) * 1e3:g} mm; "
         f"measured minus nominal: RMS {np.sqrt(np.mean(shift**2)) * 1e3:.4f} mm, "
@@ -533,8 +540,10 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument(
         "-v", "--verbose", action="count", default=argparse.SUPPRESS, help=argparse.SUPPRESS
     )
+    # only commands that load robots get the URDF chain's ends (report would ignore them)
+    urdf_ends = argparse.ArgumentParser(add_help=False)
     for end in ("base", "tip"):
-        common.add_argument(
+        urdf_ends.add_argument(
             f"--{end}-link",
             metavar="LINK",
             default=argparse.SUPPRESS,
@@ -542,11 +551,12 @@ def build_parser() -> argparse.ArgumentParser:
             + ("the root)" if end == "base" else "the end of the one movable chain)"),
         )
 
-    def command(name, **kwargs):
-        return sub.add_parser(name, parents=[common], **kwargs)
+    def command(name, urdf=True, **kwargs):
+        return sub.add_parser(name, parents=[common, urdf_ends] if urdf else [common], **kwargs)
 
     p = command(
         "robots",
+        urdf=False,
         help="list the robot catalog (name, dof, joint types, source)",
         description="List the robots in casecal's catalog.",
     )
@@ -567,7 +577,7 @@ def build_parser() -> argparse.ArgumentParser:
     def add_schedule(p, default_poses):
         p.add_argument(
             "--poses",
-            type=int,
+            type=cli_args.count(1, MAX_POSES),
             default=default_poses,
             help=f"number of poses (default {default_poses})",
         )
@@ -580,7 +590,7 @@ def build_parser() -> argparse.ArgumentParser:
         )
         p.add_argument(
             "--seed",
-            type=int,
+            type=cli_args.seed,
             default=0,
             help="random seed for uniform poses and noise (default 0)",
         )
@@ -653,16 +663,20 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="TOML of the true deviations (simulations): adds error columns",
     )
-    p.add_argument("--max-iterations", type=int, default=100, help="for iterated methods")
+    p.add_argument(
+        "--max-iterations", type=cli_args.count(1), default=100, help="for iterated methods"
+    )
     p.add_argument(
         "--holdout",
-        type=float,
+        type=cli_args.fraction,
         default=None,
         metavar="FRACTION",
         help="keep this fraction of the poses out of the fit and report the "
         "errors on them before and after calibration (e.g. 0.2)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed of --holdout (default 0)")
+    p.add_argument(
+        "--seed", type=cli_args.seed, default=0, help="random seed of --holdout (default 0)"
+    )
     p.add_argument(
         "--loss",
         choices=("linear", "huber", "soft_l1"),
@@ -671,7 +685,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--loss-scale",
-        type=float,
+        type=cli_args.positive_number,
         default=3.0,
         help="robust loss scale, in units of sigma (default 3)",
     )
@@ -726,8 +740,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--threshold", default="0.1mm", help="predicted 95 %% error to reach (default 0.1mm)"
     )
-    p.add_argument("--batch", type=int, default=5, help="poses per round (default 5)")
-    p.add_argument("--max-poses", type=int, default=300, help="stop here (default 300)")
+    p.add_argument(
+        "--batch", type=cli_args.count(1, MAX_POSES), default=5, help="poses per round (default 5)"
+    )
+    p.add_argument(
+        "--max-poses", type=cli_args.count(1), default=300, help="stop here (default 300)"
+    )
     p.add_argument(
         "--order",
         choices=("optimal", "seed", "uniform"),
@@ -761,6 +779,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = command(
         "report",
+        urdf=False,
         help="run every study and write the PDF report, figures and tables",
         description="Run the ten studies (the paper's Table 1; planar arms; SCARA observability; "
         "pose count; noise; six-axis arms with Hayati's beta; optimal poses; calibrate until a "
@@ -779,9 +798,15 @@ def build_parser() -> argparse.ArgumentParser:
         default="processes",
         help="run trials in local processes (default) or in this process",
     )
-    p.add_argument("--workers", type=int, default=None, help="local processes (default: cores)")
+    p.add_argument(
+        "--workers",
+        type=cli_args.workers,
+        default=None,
+        help="local processes, at most four per core (default: one per core)",
+    )
     p.add_argument(
         "--scheduler",
+        type=cli_args.scheduler,
         metavar="ADDRESS",
         help="run trials on a dask cluster, e.g. tcp://host:8786 "
         "(needs: pip install 'casecal[distributed]')",

@@ -9,6 +9,7 @@ one BLAS thread each: two workers that each start a BLAS thread per core thrash.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import sys
 import threading
@@ -51,6 +52,14 @@ class Executor:
     def __post_init__(self) -> None:
         if self.kind not in EXECUTORS:
             raise CalibrationError(f"unknown executor {self.kind!r}; use {', '.join(EXECUTORS)}")
+        w = self.workers
+        if w is not None and (isinstance(w, bool) or not isinstance(w, int) or w < 1):
+            # 0 once meant "all cores" by accident (`workers or cpu_count`): say so instead
+            raise CalibrationError(
+                f"workers={w!r}: give a positive number of processes, or None for one per core"
+            )
+        if isinstance(self.scheduler, str):
+            self.scheduler = check_scheduler(self.scheduler)
 
     @property
     def n_workers(self) -> int:
@@ -162,6 +171,33 @@ class Executor:
             if own is not None:
                 client.close()
                 own.close()
+
+
+_ADDRESS = re.compile(r"(?:(?:tcp|tls)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):([0-9]{1,5})")
+_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]*[A-Za-z0-9])?")
+
+
+def check_scheduler(address: str) -> str:
+    """`address` if it is a dask scheduler address, ``[tcp://]host:port``, else a
+    CalibrationError: refused before a study runs, not after the first one.
+
+    The host is a name (with a letter), a dotted IPv4 address or a bracketed IPv6 one; the
+    port is 1 to 65535. ``9:1`` is no address (dask read it as a size: 3 EiB).
+    """
+    text = address.strip()
+    match = _ADDRESS.fullmatch(text)
+    ok = match is not None and 1 <= int(match[2]) <= 65535
+    if ok and not match[1].startswith("["):
+        labels = match[1].split(".")
+        ipv4 = len(labels) == 4 and all(p.isdigit() and int(p) <= 255 for p in labels)
+        name = all(_LABEL.fullmatch(p) for p in labels) and any(c.isalpha() for c in match[1])
+        ok = ipv4 or name
+    if not ok:
+        raise CalibrationError(
+            f"scheduler address {address!r} is not [tcp://]host:port (a host name or IP "
+            "address and a port from 1 to 65535); give e.g. --scheduler tcp://localhost:8786"
+        )
+    return text
 
 
 class Terminated(KeyboardInterrupt):
