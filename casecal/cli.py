@@ -29,8 +29,6 @@ from .model.catalog import load_deviations, load_robot, nominal_of, robots
 from .model.parameters import unit
 
 _LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
-MAX_POSES = 10_000_000
-"""--poses above this is a typo, not a schedule (10 million poses of six joints: 4 GB)."""
 
 
 def parse_length(text: str) -> float:
@@ -577,7 +575,7 @@ def build_parser() -> argparse.ArgumentParser:
     def add_schedule(p, default_poses):
         p.add_argument(
             "--poses",
-            type=cli_args.count(1, MAX_POSES),
+            type=int,
             default=default_poses,
             help=f"number of poses (default {default_poses})",
         )
@@ -590,7 +588,7 @@ def build_parser() -> argparse.ArgumentParser:
         )
         p.add_argument(
             "--seed",
-            type=cli_args.seed,
+            type=int,
             default=0,
             help="random seed for uniform poses and noise (default 0)",
         )
@@ -663,20 +661,16 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="TOML of the true deviations (simulations): adds error columns",
     )
-    p.add_argument(
-        "--max-iterations", type=cli_args.count(1), default=100, help="for iterated methods"
-    )
+    p.add_argument("--max-iterations", type=int, default=100, help="for iterated methods")
     p.add_argument(
         "--holdout",
-        type=cli_args.fraction,
+        type=float,
         default=None,
         metavar="FRACTION",
         help="keep this fraction of the poses out of the fit and report the "
         "errors on them before and after calibration (e.g. 0.2)",
     )
-    p.add_argument(
-        "--seed", type=cli_args.seed, default=0, help="random seed of --holdout (default 0)"
-    )
+    p.add_argument("--seed", type=int, default=0, help="random seed of --holdout (default 0)")
     p.add_argument(
         "--loss",
         choices=("linear", "huber", "soft_l1"),
@@ -685,7 +679,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--loss-scale",
-        type=cli_args.positive_number,
+        type=float,
         default=3.0,
         help="robust loss scale, in units of sigma (default 3)",
     )
@@ -740,12 +734,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--threshold", default="0.1mm", help="predicted 95 %% error to reach (default 0.1mm)"
     )
-    p.add_argument(
-        "--batch", type=cli_args.count(1, MAX_POSES), default=5, help="poses per round (default 5)"
-    )
-    p.add_argument(
-        "--max-poses", type=cli_args.count(1), default=300, help="stop here (default 300)"
-    )
+    p.add_argument("--batch", type=int, default=5, help="poses per round (default 5)")
+    p.add_argument("--max-poses", type=int, default=300, help="stop here (default 300)")
     p.add_argument(
         "--order",
         choices=("optimal", "seed", "uniform"),
