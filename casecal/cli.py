@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from . import __version__, cli_args
 from .data.files import read_csv, write_atomic, write_csv, write_together
 from .data.measurements import simulate
 from .design import poses
@@ -70,9 +70,14 @@ def _cmd_simulate(args: argparse.Namespace) -> None:
     true = robot.with_deviations(deviations)
     q = _schedule(robot, args)
     meas = simulate(true, q, noise=parse_length(args.noise), seed=args.seed)
+    # every measured point of every pose (a robot may carry several reflectors)
+    shift = np.linalg.norm(meas.points - robot.measured_points(meas.q), axis=-1)
     write_csv(args.output, meas, robot)
-    shift = np.linalg.norm(meas.positions - robot.position(q), axis=1)
-    print(f"wrote {meas.n_poses} poses of {robot.name} ({args.schedule} schedule) to {args.output}")
+    each = f", {shift.shape[1]} points each" if shift.shape[1] > 1 else ""
+    print(
+        f"wrote {meas.n_poses} poses{each} of {robot.name} ({args.schedule} schedule) "
+        f"to {args.output}"
+    )
     print(
         f"{len(deviations)} deviations, noise sigma {parse_length(args.noise) * 1e3:g} mm; "
         f"measured minus nominal: RMS {np.sqrt(np.mean(shift**2)) * 1e3:.4f} mm, "
@@ -538,8 +543,10 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument(
         "-v", "--verbose", action="count", default=argparse.SUPPRESS, help=argparse.SUPPRESS
     )
+    # only commands that load robots get the URDF chain's ends (report would ignore them)
+    urdf_ends = argparse.ArgumentParser(add_help=False)
     for end in ("base", "tip"):
-        common.add_argument(
+        urdf_ends.add_argument(
             f"--{end}-link",
             metavar="LINK",
             default=argparse.SUPPRESS,
@@ -547,11 +554,12 @@ def build_parser() -> argparse.ArgumentParser:
             + ("the root)" if end == "base" else "the end of the one movable chain)"),
         )
 
-    def command(name, **kwargs):
-        return sub.add_parser(name, parents=[common], **kwargs)
+    def command(name, urdf=True, **kwargs):
+        return sub.add_parser(name, parents=[common, urdf_ends] if urdf else [common], **kwargs)
 
     p = command(
         "robots",
+        urdf=False,
         help="list the robot catalog (name, dof, joint types, source)",
         description="List the robots in casecal's catalog.",
     )
@@ -766,6 +774,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = command(
         "report",
+        urdf=False,
         help="run every study and write the PDF report, figures and tables",
         description="Run the ten studies (the paper's Table 1; planar arms; SCARA observability; "
         "pose count; noise; six-axis arms with Hayati's beta; optimal poses; calibrate until a "
@@ -791,9 +800,15 @@ def build_parser() -> argparse.ArgumentParser:
         default="processes",
         help="run trials in local processes (default) or in this process",
     )
-    p.add_argument("--workers", type=int, default=None, help="local processes (default: cores)")
+    p.add_argument(
+        "--workers",
+        type=cli_args.workers,
+        default=None,
+        help="local processes, at most four per core (default: one per core)",
+    )
     p.add_argument(
         "--scheduler",
+        type=cli_args.scheduler,
         metavar="ADDRESS",
         help="run trials on a dask cluster, e.g. tcp://host:8786 "
         "(needs: pip install 'casecal[distributed]')",

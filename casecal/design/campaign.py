@@ -209,6 +209,17 @@ def pool_measure(pool: Measurements) -> tuple[np.ndarray, Callable]:
     """Candidates and a `measure` that looks requested poses up in measured `pool`."""
 
     def measure(q):
-        return pool.take([int(np.flatnonzero(np.all(pool.q == row, axis=1))[0]) for row in q])
+        rows = []
+        for row in q:
+            # equal up to the round trip of a pose through the file's degrees
+            hit = np.flatnonzero(np.all(np.abs(pool.q - row) <= 1e-9, axis=1))
+            if not len(hit):
+                raise CalibrationError(
+                    "a requested pose is not in the measured pool: order 'seed' (--order "
+                    "seed) takes the paper's schedule, so the pool must hold it (measure it, "
+                    "or simulate with --schedule seed); else use --order optimal or uniform"
+                )
+            rows.append(int(hit[0]))
+        return pool.take(rows)
 
     return pool.q.copy(), measure
