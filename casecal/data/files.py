@@ -57,8 +57,8 @@ def read_csv(path, robot: Robot) -> Measurements:
     try:
         return _read_csv(path, robot)
     except MemoryError:
-        label = "standard input" if str(path) == "-" else str(path)
-        raise CalibrationError(too_big(path, label)) from None
+        pass  # out of the except clause, the traceback's arrays are freed: then measure
+    raise CalibrationError(too_big(path, "standard input" if str(path) == "-" else str(path)))
 
 
 def _read_csv(path, robot: Robot) -> Measurements:

@@ -19,7 +19,8 @@ CHUNK_ROWS = 20_000
 """Rows parsed at a time: each chunk's columns become numbers before the next is read."""
 
 READ_COST = 3
-"""Memory to read a file, in multiples of its size (measured: 1.4 at 1e6 rows of puma560)."""
+"""Memory to read a file, in multiples of its size (measured: 1.5 at 1e6 rows of puma560,
+1.7 at 1e5: the parser's buffers count more in a small file)."""
 
 
 def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]:
@@ -50,7 +51,9 @@ def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]
         df = pd.concat(chunks, ignore_index=True) if len(chunks) > 1 else chunks[0]
         del chunks
     except MemoryError:
-        raise CalibrationError(too_big(path, label)) from None
+        df = None  # measured below, once the failed attempt's memory is free
+    if df is None:
+        raise CalibrationError(too_big(path, label))
     columns = [str(c).strip() for c in df.columns]
     duplicated = sorted({c for c in columns if columns.count(c) > 1} | _mangled(columns))
     if duplicated:
@@ -101,12 +104,16 @@ def _check_text(data: bytes, label: str, what: str) -> None:
         raise CalibrationError(f"{label}: the {what} is not UTF-8 text; save it as UTF-8") from None
     finally:
         view.release()
-    hashed = 0 if data.startswith(b"#") else data.find(b"\n#")
-    if hashed >= 0:
-        line = data.count(b"\n", 0, hashed) + 1 + (hashed > 0)
+    if data.startswith((b"#", codecs.BOM_UTF8 + b"#")):
+        line = 1
+    else:
+        at = data.find(b"\n#")
+        line = data.count(b"\n", 0, at + 1) + 1 if at >= 0 else 0
+    if line:
+        name = "FILE" if label == "standard input" else label
         raise CalibrationError(
             f"{label}: line {line} starts with '#': CSV files have no comments; delete the "
-            "comment lines (e.g. grep -v '^#' FILE > clean.csv)"
+            f"comment lines (e.g. grep -v '^#' {name} > clean.csv)"
         )
 
 
@@ -137,6 +144,8 @@ def _chunks(data: bytes, sep: str, label: str) -> list[pd.DataFrame]:
             f"{label}: the file is empty; it needs a header and one row per pose"
         ) from None
     except (pd.errors.ParserError, ValueError) as exc:
+        if "out of memory" in str(exc):  # the C tokenizer's MemoryError
+            raise MemoryError from None
         detail = " ".join(str(exc).split())  # pandas' messages span lines
         raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
 
@@ -154,8 +163,8 @@ def too_big(path, label: str) -> str:
         pass
     free = _free_memory()
     rows = ""
-    if free and per_row:
-        fit = int(free / (READ_COST * per_row)) // 1000 * 1000
+    fit = int(free / (READ_COST * per_row)) // 1000 * 1000 if free and per_row else 0
+    if fit:
         rows = f"; about {fit:,} rows would fit (e.g. head -n {fit + 1} {label} > part.csv)"
     what = f"{size / 1e6:,.0f} MB, " if size else ""
     return (
