@@ -36,8 +36,7 @@ def run(argv, stdin: str = "q1_deg,q2_deg\n0,0\n10,20\n") -> tuple[int, str, str
     """`casecal ARGV` in this process: (exit code, stdout, stderr); an exception that
     escapes `main` propagates (it is the traceback and exit 1 a user would get)."""
     out, err = io.StringIO(), io.StringIO()
-    saved = warnings.showwarning, cli.WRITTEN[:]
-    cli.WRITTEN.clear()
+    saved = warnings.showwarning
     real_stdin = sys.stdin
     sys.stdin = io.TextIOWrapper(io.BytesIO(stdin.encode()))  # with .buffer, as a pipe
     try:
@@ -48,8 +47,7 @@ def run(argv, stdin: str = "q1_deg,q2_deg\n0,0\n10,20\n") -> tuple[int, str, str
                 code = exc.code if isinstance(exc.code, int) else 2
     finally:
         sys.stdin = real_stdin
-        warnings.showwarning = saved[0]
-        cli.WRITTEN[:] = saved[1]
+        warnings.showwarning = saved
     return code, out.getvalue(), err.getvalue()
 
 

@@ -16,7 +16,6 @@ Every mistake raises `CalibrationError` naming the file, the row or column, and 
 
 from __future__ import annotations
 
-import io
 import math
 import re
 import warnings
@@ -29,6 +28,7 @@ from ..model.frames import matrix_from_quaternion, quaternion_from_matrix
 from ..model.robot import Robot
 from ..textio import read_text, write_atomic, write_together  # noqa: F401 (re-export)
 from .measurements import Measurements
+from .table import read_table, too_big
 from .units import at_the_door
 
 _SCALE = {"": 1.0, "m": 1.0, "mm": 1e-3, "um": 1e-6, "rad": 1.0, "deg": math.pi / 180.0}
@@ -37,6 +37,11 @@ _JOINT = re.compile(r"^q(\d+)(?:_(deg|rad|mm|m))?$")
 
 def read_csv(path, robot: Robot) -> Measurements:
     """Read measurements of `robot` from a CSV file (format in the module doc).
+
+    The file must be UTF-8 text; a line starting with ``#`` is refused, naming its line
+    (CSV has no comments, and skipping lines would shift every row number a message
+    gives). Reading takes at most 3 times the file's size in memory (`read_table`); a file
+    too large is one error saying how many rows would fit.
 
     Parameters
     ----------
@@ -49,6 +54,14 @@ def read_csv(path, robot: Robot) -> Measurements:
     Measurements
         SI units.
     """
+    try:
+        return _read_csv(path, robot)
+    except MemoryError:
+        pass  # out of the except clause, the traceback's arrays are freed: then measure
+    raise CalibrationError(too_big(path, "standard input" if str(path) == "-" else str(path)))
+
+
+def _read_csv(path, robot: Robot) -> Measurements:
     df, label = read_table(path)
     columns = list(df.columns)
     q = read_joints(df, robot, label)
@@ -209,57 +222,6 @@ def _orientations(df: pd.DataFrame, columns, label: str) -> np.ndarray | None:
     return matrix_from_quaternion(quat / norm[:, None])
 
 
-def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]:
-    """A CSV file as a DataFrame of strings, checked: it exists, parses, has unique columns
-    and at least one row. Returns the frame and the label for messages.
-
-    `path` may be ``"-"`` (standard input), a pipe or a process substitution. Commas
-    separate the columns; a file whose header is split by tabs or semicolons instead is
-    read with that separator.
-    """
-    label = "standard input" if str(path) == "-" else str(path)
-    text = read_text(path, what)
-    first = text.split("\n", 1)[0]
-    sep = next((d for d in ("\t", ";") if d in first and "," not in first), ",")
-    try:
-        with warnings.catch_warnings():
-            # a row with more fields than the header must fail, not lose or shift data
-            warnings.simplefilter("error", pd.errors.ParserWarning)
-            df = pd.read_csv(
-                io.StringIO(text),
-                sep=sep,
-                dtype=str,
-                keep_default_na=False,
-                skipinitialspace=True,
-                index_col=False,
-            )
-    except pd.errors.ParserWarning:
-        raise CalibrationError(
-            f"{label}: some rows have more fields than the header; check the delimiters "
-            "and that every value has a column name"
-        ) from None
-    except pd.errors.EmptyDataError:
-        raise CalibrationError(
-            f"{label}: the file is empty; it needs a header and one row per pose"
-        ) from None
-    except (pd.errors.ParserError, ValueError) as exc:
-        if "on source failed" in str(exc):
-            # pandas turns a Ctrl-C that lands in its read of this in-memory text (which
-            # cannot fail otherwise) into this error: it is an interrupt, not a bad file
-            raise KeyboardInterrupt from None
-        detail = " ".join(str(exc).split())  # pandas' messages span lines
-        raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
-    columns = [str(c).strip() for c in df.columns]
-    duplicated = sorted({c for c in columns if columns.count(c) > 1} | _mangled(columns))
-    if duplicated:
-        raise CalibrationError(f"{label}: column {duplicated[0]!r} appears twice; keep one")
-    df.columns = columns
-    if df.empty:
-        raise CalibrationError(f"{label}: the header has no rows below it; add one row per pose")
-
-    return df, label
-
-
 def read_joints(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
     """The joint columns of `df` for `robot`, in SI, shape (N, dof); warns outside limits."""
     columns = list(df.columns)
@@ -344,15 +306,6 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
     write_atomic(path, text)
 
 
-def _mangled(columns) -> set[str]:
-    # pandas renames a repeated header 'x' to 'x.1'
-    return {
-        c.rsplit(".", 1)[0]
-        for c in columns
-        if re.search(r"\.\d+$", c) and c.rsplit(".", 1)[0] in columns
-    }
-
-
 def _pick(df: pd.DataFrame, label: str, bases, joint) -> tuple[str, float]:
     """The one column holding `bases[0]` in some unit, and its scale to SI."""
     base = bases[0]
@@ -386,12 +339,17 @@ def _pick(df: pd.DataFrame, label: str, bases, joint) -> tuple[str, float]:
 
 
 def _numbers(df: pd.DataFrame, column: str, label: str) -> np.ndarray:
-    values = pd.to_numeric(df[column].str.strip(), errors="coerce").to_numpy(dtype=float)
+    """A column as float64; a value that is not a finite number is refused with its row."""
+    col = df[column]
+    if col.dtype.kind in "iuf":  # parsed as numbers (`read_table`): no strings to convert
+        values = col.to_numpy(dtype=float)
+    else:  # some text ('True' too, which pandas reads as a bool): as before, number by number
+        values = pd.to_numeric(col.astype(str).str.strip(), errors="coerce").to_numpy(float)
     bad = ~np.isfinite(values)
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
         raise CalibrationError(
-            f"{label}: row {row + 2}, column {column!r}: {df[column].iloc[row]!r} is not a "
+            f"{label}: row {row + 2}, column {column!r}: {str(col.iloc[row])!r} is not a "
             "finite number; fix or remove that row"
         )
     return values

@@ -43,6 +43,7 @@ from .rounds import LOSSES, Settings, fit_in_rounds
 from .scale import door, with_size_check
 from .solvers import SOLVERS
 from .start import choose_frame, partial_base_start
+from .summary import stand_out
 
 log = logging.getLogger(__name__)
 
@@ -216,6 +217,8 @@ def identify(
     point_residuals = est.point_residuals(x0)
     checks = with_size_check(audit(got.facts), robot, out.robot, q, y)
     status, message = verdict(checks, out.solver_status, out.message)
+    if status < 0 and got.outliers:  # the likelier cause leads (issue 20)
+        message = f"{stand_out(got.outliers, loss)}; {message}"
 
     calibrated = frame.robot_out(out.robot)
     cov = frame.covariance_out(got.covariance, out.estimated, out.robot, robot.base.rpy)

@@ -108,6 +108,21 @@ def build_summary(cal: Calibration) -> Summary:
     )
 
 
+def stand_out(outliers, loss: str = "linear") -> str:
+    """Which poses stand out (file rows: the header is row 1) and what to do about them.
+
+    A failed fit leads with this (`casecal.identification.fit.verdict`): a gross value in
+    one row is the likelier cause than anything the audit then finds.
+    """
+    rows = ", ".join(str(i + 2) for i in outliers[:12]) + (" …" if len(outliers) > 12 else "")
+    one = len(outliers) == 1
+    what = (
+        f"{len(outliers)} {'pose stands' if one else 'poses stand'} out "
+        f"(file {'row' if one else 'rows'} {rows}): check {'it' if one else 'them'}"
+    )
+    return what + (", or fit with a robust loss (--loss huber)" if loss == "linear" else "")
+
+
 def _notes(cal: Calibration) -> list[str]:
     notes = []
     if not cal.success:
@@ -116,7 +131,8 @@ def _notes(cal: Calibration) -> list[str]:
             if cal.audit is not None and cal.audit.failures
             else cal.message
         )
-        notes.append(f"The fit FAILED: {reasons}. Do not use these values.")
+        cause = f"{stand_out(cal.outliers, cal.loss)}; " if cal.outliers else ""
+        notes.append(f"The fit FAILED: {cause}{reasons}. Do not use these values.")
     if cal.start_note:
         notes.append(cal.start_note)
     if cal.joined:
@@ -129,14 +145,8 @@ def _notes(cal: Calibration) -> list[str]:
     notes += _held_notes(cal)
     if cal.loss != "linear":
         notes.append(f"Robust fit: {cal.loss} loss, by iteratively reweighted least squares.")
-    if cal.outliers:
-        rows = ", ".join(str(i + 2) for i in cal.outliers[:12]) + (
-            " …" if len(cal.outliers) > 12 else ""
-        )
-        notes.append(
-            f"{len(cal.outliers)} poses stand out (file rows {rows}): check them, or fit with "
-            "a robust loss (--loss huber)."
-        )
+    if cal.outliers and cal.success:  # a failed fit's first note names them
+        notes.append(f"{stand_out(cal.outliers, cal.loss)}.")
     poor = cal.poorly_determined
     if poor:
         shown = ", ".join(f"{n} ± {_se_text(n, cal.standard_errors[n])}" for n in poor[:6]) + (

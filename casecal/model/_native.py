@@ -83,8 +83,13 @@ int casecal_batch(const casadi_real* q, const casadi_real* p, casadi_real* out,
 
 
 def cache_dir() -> Path:
-    """Where compiled kernels live: ``$CASECAL_CACHE``, else ``~/.cache/casecal``."""
-    return Path(os.environ.get("CASECAL_CACHE") or Path.home() / ".cache" / "casecal")
+    """Where compiled kernels live: ``$CASECAL_CACHE``, else ``~/.cache/casecal``.
+
+    Always an absolute path: dlopen searches the library path, not the working folder, for
+    a name without a slash (``CASECAL_CACHE=.`` built kernels it then could not load).
+    """
+    folder = os.environ.get("CASECAL_CACHE") or str(Path.home() / ".cache" / "casecal")
+    return Path(os.path.abspath(os.path.expanduser(folder)))
 
 
 def compiler() -> str | None:
@@ -178,8 +183,14 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int, joint_trig=()):
             lib = _load(lib_path, digest)
         if lib is None:
             raise OSError(f"the kernel just built at {lib_path} does not verify")
-    except (OSError, subprocess.CalledProcessError) as exc:
-        _say_once(f"could not compile kernels ({exc}); evaluating with numpy instead", log.warning)
+    except NotOurs as exc:
+        _say_once(f"{exc}; evaluating with numpy instead", log.warning, "cache")
+        return None
+    except _CANNOT as exc:
+        # every kernel of a read-only cache fails alike: one line per process, not per kernel
+        reason = _reason(exc)
+        message = f"could not compile kernels ({reason}); evaluating with numpy instead"
+        _say_once(message, log.warning, "cache")
         return None
     batch = lib.casecal_batch
     batch.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
@@ -199,14 +210,32 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int, joint_trig=()):
     return call
 
 
+class NotOurs(OSError):
+    """Something casecal did not write sits where a kernel goes: it is left alone."""
+
+
+_CANNOT = (OSError, subprocess.CalledProcessError, UnicodeDecodeError, ValueError, RuntimeError)
+"""What compiling and loading a kernel may raise: a read-only or full cache, a failing
+compiler, a loader message that is not text, CasADi's code generation."""
+
 _SAID: set[str] = set()
 
 
-def _say_once(message: str, say=None) -> None:
-    """Log `message` (info, or with `say`) once per process: every kernel would repeat it."""
-    if message not in _SAID:
-        _SAID.add(message)
+def _say_once(message: str, say=None, topic: str | None = None) -> None:
+    """Log `message` (info, or with `say`) once per process: every kernel would repeat it.
+
+    Messages of one `topic` count as one (they differ only in the kernel's name).
+    """
+    if (topic or message) not in _SAID:
+        _SAID.add(topic or message)
         (say or log.info)(message)
+
+
+def _reason(exc: BaseException) -> str:
+    """One line for `exc`: a loader's message may hold bytes that are not text."""
+    if isinstance(exc, UnicodeDecodeError):
+        return "the loader's message is not text"
+    return " ".join(str(exc).split())
 
 
 def _load(lib_path: Path, digest: str):
@@ -216,10 +245,20 @@ def _load(lib_path: Path, digest: str):
     """
     if not lib_path.exists():
         return None
+    if lib_path.is_dir():
+        return _folder_in_place(lib_path)
+    for path in (lib_path, _sidecar(lib_path)):
+        if path.exists() and not path.is_file():  # reading a FIFO would wait forever
+            raise NotOurs(f"{path} is not a regular file; remove it so casecal can rebuild it")
     problem = _damage(lib_path)
     lib = None
     if problem is None:
-        lib = ctypes.CDLL(str(lib_path))
+        try:
+            lib = ctypes.CDLL(str(lib_path))
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            # a file whose checksum record was rewritten to match its damage
+            problem = f"it does not load: {_reason(exc)}"
+    if lib is not None:
         key = getattr(lib, "casecal_key", None)
         if key is None:
             problem = "it exports no kernel key"
@@ -247,6 +286,19 @@ def _close(lib) -> None:
         pass
 
 
+def _folder_in_place(lib_path: Path) -> None:
+    """An empty folder where a kernel goes is removed (nothing is lost) so the kernel is
+    built; one holding files is not casecal's to delete."""
+    try:
+        lib_path.rmdir()
+    except OSError:
+        raise NotOurs(
+            f"{lib_path} is a folder, not a compiled kernel; remove it (or set "
+            "CASECAL_CACHE to another folder) so that casecal can build its kernels"
+        ) from None
+    log.warning("cached kernel %s was an empty folder; building it", lib_path.name)
+
+
 def _damage(lib_path: Path) -> str | None:
     """Why the file at `lib_path` is not the library that was built there, or None."""
     try:
@@ -254,6 +306,12 @@ def _damage(lib_path: Path) -> str | None:
         data = lib_path.read_bytes()
     except (OSError, ValueError):
         return "its size and checksum record is missing"
+    if not (
+        isinstance(record, dict)
+        and type(record.get("size")) is int
+        and isinstance(record.get("sha256"), str)
+    ):
+        return "its size and checksum record is garbled"
     if len(data) != record.get("size"):
         return f"{len(data)} bytes instead of {record.get('size')}"
     if hashlib.sha256(data).hexdigest() != record.get("sha256"):

@@ -1,0 +1,207 @@
+"""A CSV file as a table of numbers, read in chunks so the file, not the parser, bounds
+the memory (`read_table`, used by `casecal.data.files.read_csv`)."""
+
+from __future__ import annotations
+
+import codecs
+import io
+import os
+import re
+import sys
+import warnings
+from pathlib import Path
+
+import pandas as pd
+
+from ..errors import CalibrationError
+
+CHUNK_ROWS = 20_000
+"""Rows parsed at a time: each chunk's columns become numbers before the next is read."""
+
+READ_COST = 3
+"""Memory to read a file, in multiples of its size (measured: 1.5 at 1e6 rows of puma560,
+1.7 at 1e5: the parser's buffers count more in a small file)."""
+
+
+def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]:
+    """A CSV file as a DataFrame, checked: it exists, parses, has unique columns and at
+    least one row. Returns the frame and the label for messages.
+
+    Columns whose every value is a number are float64 or int64 (parsed once, exactly as
+    Python's ``float`` does); others hold strings, which `casecal.data.files` refuses with
+    the row and value where a number is needed. Reading costs about the file's size in
+    memory, at most `READ_COST` times it; a file too large for the memory at hand is one
+    error saying how many rows would fit.
+
+    `path` may be ``"-"`` (standard input), a pipe or a process substitution. Commas
+    separate the columns; a file whose header is split by tabs or semicolons instead is
+    read with that separator. The text must be UTF-8 (with or without a byte-order mark);
+    UTF-16 is refused by name. A line starting with ``#`` is refused with its line number,
+    not skipped: CSV has no comments, and skipping lines would shift the row numbers that
+    every message (and the outlier notes) give.
+    """
+    label = "standard input" if str(path) == "-" else str(path)
+    try:
+        data = _read_bytes(path, what)
+        _check_text(data, label, what)
+        first = data[:65536].split(b"\n", 1)[0]
+        sep = next((d for d in ("\t", ";") if d.encode() in first and b"," not in first), ",")
+        chunks = _chunks(data, sep, label)
+        del data  # the text goes before the chunks are joined: the peak is one of them
+        df = pd.concat(chunks, ignore_index=True) if len(chunks) > 1 else chunks[0]
+        del chunks
+    except MemoryError:
+        df = None  # measured below, once the failed attempt's memory is free
+    if df is None:
+        raise CalibrationError(too_big(path, label))
+    columns = [str(c).strip() for c in df.columns]
+    duplicated = sorted({c for c in columns if columns.count(c) > 1} | _mangled(columns))
+    if duplicated:
+        raise CalibrationError(f"{label}: column {duplicated[0]!r} appears twice; keep one")
+    df.columns = columns
+    if df.empty:
+        raise CalibrationError(f"{label}: the header has no rows below it; add one row per pose")
+    return df, label
+
+
+def _read_bytes(path, what: str) -> bytes:
+    """The bytes of a file (``"-"``: standard input), as `casecal.textio.read_text` reads
+    it but not decoded: a str of the whole file would cost its size again."""
+    if str(path) == "-":
+        return sys.stdin.buffer.read()
+    p = Path(path)
+    if not p.exists():
+        raise CalibrationError(f"{what} {str(path)!r} does not exist; check the path")
+    if p.is_dir():
+        raise CalibrationError(f"{what} {str(path)!r} is a folder; give a file")
+    try:
+        with open(p, "rb") as fh:  # pipes and process substitutions too
+            return fh.read()
+    except OSError as exc:
+        raise CalibrationError(f"cannot read {what} {str(path)!r}: {exc.strerror}") from None
+
+
+def _check_text(data: bytes, label: str, what: str) -> None:
+    """Refuse UTF-16 (whose ASCII letters are valid UTF-8 between NUL bytes, so it parsed
+    as one garbled column), other binary or non-UTF-8 files, and ``#`` lines."""
+    head = data[:4096]
+    if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)) or (
+        b"\x00" in head and max(head[0::2].count(0), head[1::2].count(0)) > len(head) // 4
+    ):
+        raise CalibrationError(
+            f"{label}: the file is UTF-16 text; save it as UTF-8 (in Excel: CSV UTF-8; "
+            "or iconv -f UTF-16 -t UTF-8)"
+        )
+    if b"\x00" in data:
+        raise CalibrationError(f"{label}: the file holds NUL bytes: it is not a text {what}")
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    view = memoryview(data)
+    try:
+        for start in range(0, len(data), 1 << 20):  # validate without a str of the whole file
+            decoder.decode(view[start : start + (1 << 20)])
+        decoder.decode(b"", final=True)
+    except UnicodeDecodeError:
+        raise CalibrationError(f"{label}: the {what} is not UTF-8 text; save it as UTF-8") from None
+    finally:
+        view.release()
+    if data.startswith((b"#", codecs.BOM_UTF8 + b"#")):
+        line = 1
+    else:
+        at = data.find(b"\n#")
+        line = data.count(b"\n", 0, at + 1) + 1 if at >= 0 else 0
+    if line:
+        name = "FILE" if label == "standard input" else label
+        raise CalibrationError(
+            f"{label}: line {line} starts with '#': CSV files have no comments; delete the "
+            f"comment lines (e.g. grep -v '^#' {name} > clean.csv)"
+        )
+
+
+def _chunks(data: bytes, sep: str, label: str) -> list[pd.DataFrame]:
+    """`data` parsed `CHUNK_ROWS` rows at a time, each column typed as it is read."""
+    try:
+        with warnings.catch_warnings():
+            # a row with more fields than the header must fail, not lose or shift data
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            reader = pd.read_csv(
+                io.BytesIO(data),  # shares the bytes, no copy
+                sep=sep,
+                encoding="utf-8",
+                na_filter=False,  # an empty or 'NA' field is text, refused where a number goes
+                skipinitialspace=True,
+                index_col=False,
+                chunksize=CHUNK_ROWS,
+            )
+            with reader:
+                return list(reader)
+    except pd.errors.ParserWarning:
+        raise CalibrationError(
+            f"{label}: some rows have more fields than the header; check the delimiters "
+            "and that every value has a column name"
+        ) from None
+    except pd.errors.EmptyDataError:
+        raise CalibrationError(
+            f"{label}: the file is empty; it needs a header and one row per pose"
+        ) from None
+    except (pd.errors.ParserError, ValueError) as exc:
+        if "out of memory" in str(exc):  # the C tokenizer's MemoryError
+            raise MemoryError from None
+        if "on source failed" in str(exc):
+            # pandas turns a Ctrl-C that lands in its read of these in-memory bytes (which
+            # cannot fail otherwise) into this error: it is an interrupt, not a bad file
+            raise KeyboardInterrupt from None
+        detail = " ".join(str(exc).split())  # pandas' messages span lines
+        raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
+
+
+def too_big(path, label: str) -> str:
+    """The message for a file that does not fit in memory: its size and what would fit."""
+    size, per_row = 0, 0.0
+    try:
+        if str(path) != "-":  # standard input is gone once read
+            size = os.stat(path).st_size
+            with open(path, "rb") as fh:
+                head = fh.read(1 << 16)
+            per_row = len(head) / max(head.count(b"\n"), 1)
+    except OSError:
+        pass
+    free = _free_memory()
+    rows = ""
+    fit = int(free / (READ_COST * per_row)) // 1000 * 1000 if free and per_row else 0
+    if fit:
+        rows = f"; about {fit:,} rows would fit (e.g. head -n {fit + 1} {label} > part.csv)"
+    what = f"{size / 1e6:,.0f} MB, " if size else ""
+    return (
+        f"{label}: not enough memory to read the file ({what}reading takes up to "
+        f"{READ_COST}x its size){rows}; split it or use a machine with more memory"
+    )
+
+
+def _free_memory() -> float | None:
+    """Bytes this process could still get (Linux: available memory and its address-space
+    limit), or None where that is unknown."""
+    free = []
+    try:
+        text = Path("/proc/meminfo").read_text()
+        free.append(float(re.search(r"MemAvailable:\s+(\d+)", text).group(1)) * 1024)
+    except (OSError, AttributeError):
+        pass
+    try:
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if limit != resource.RLIM_INFINITY:
+            used = int(Path("/proc/self/statm").read_text().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+            free.append(max(limit - used, 0))
+    except (ImportError, OSError, ValueError, IndexError):
+        pass
+    return min(free) if free else None
+
+
+def _mangled(columns) -> set[str]:
+    # pandas renames a repeated header 'x' to 'x.1'
+    return {
+        c.rsplit(".", 1)[0]
+        for c in columns
+        if re.search(r"\.\d+$", c) and c.rsplit(".", 1)[0] in columns
+    }
