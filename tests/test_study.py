@@ -39,12 +39,15 @@ def test_rows_and_reproducibility():
     assert not np.allclose(other.rms_holdout_mm, df.rms_holdout_mm)
 
 
-def test_local_processes_and_dask_give_the_same_frame():
+def test_local_processes_and_dask_give_the_same_frame(tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     serial = run_study(SMALL, executor="serial")
     processes = run_study(SMALL, executor="processes", workers=2)
     pd.testing.assert_frame_equal(comparable(serial), comparable(processes))
+    import dask
+
     with (
+        dask.config.set({"temporary-directory": str(tmp_path)}),  # not left in /tmp
         distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False) as cluster,
         distributed.Client(cluster) as client,
     ):

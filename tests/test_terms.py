@@ -141,7 +141,10 @@ def test_terms_and_masses_survive_a_robot_file_and_stay_out_of_a_urdf(tmp_path):
     q = cc.poses.uniform(robot, 20, seed=6)
     assert back.parameter_names == robot.parameter_names
     assert np.abs(back.measured_points(q) - robot.measured_points(q)).max() == 0
-    notes = cc.save_robot(robot, tmp_path / "r.urdf")
+    from casecal.model.export_check import ExportLossWarning
+
+    with pytest.warns(ExportLossWarning, match="not written"):  # and it says so, in mm
+        notes = cc.save_robot(robot, tmp_path / "r.urdf")
     assert any("not written" in n and "compensate" in n for n in notes)
 
 
