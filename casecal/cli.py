@@ -18,10 +18,11 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, cli_args
+from ._signals import sigterm_unwinds
 from .data.files import read_csv, write_atomic, write_csv, write_together
 from .data.measurements import simulate
 from .design import poses
-from .errors import CalibrationError
+from .errors import CalibrationError, Terminated
 from .identification.analysis import observability
 from .identification.fit import DEFAULT_METHOD, METHODS, identify
 from .identification.validation import split, validate
@@ -820,24 +821,25 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run the ``casecal`` command; returns the exit code.
 
-    0 success; 2 a user error, one line on stderr; 130 interrupted (Ctrl-C), one line
-    saying what was written; 1 a bug, with its traceback.
+    0 success; 2 a user error, one line on stderr; 130 interrupted (Ctrl-C) and 143
+    terminated (SIGTERM), one line saying what was written; 1 a bug, with its traceback.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
     level = {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG)
     logging.basicConfig(level=level, format="casecal: %(levelname)s: %(message)s")
     warnings.showwarning = _one_line_warning
-    with recording() as written:  # filled as each file is put in place, not after
+    with recording() as written, sigterm_unwinds():  # written: as each file is in place
         try:
             args.func(args)
         except CalibrationError as exc:
             print(f"casecal: error: {exc}", file=sys.stderr)
             return 2
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             done = f"written: {', '.join(written)}" if written else "nothing was written"
-            print(f"casecal: interrupted; {done}", file=sys.stderr)
-            return 130
+            how = "terminated" if isinstance(exc, Terminated) else "interrupted"
+            print(f"casecal: {how}; {done}", file=sys.stderr)
+            return 143 if isinstance(exc, Terminated) else 130
         except BrokenPipeError:  # e.g. `casecal robots | head`
             return 0
         except OSError as exc:  # the system refused a read or write the library did not foresee

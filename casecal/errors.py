@@ -12,3 +12,9 @@ class CalibrationError(ValueError):
 class CalibrationWarning(UserWarning):
     """Something the user should look at that does not stop the work (e.g. joint values
     outside the robot's limits). The command line prints it as one line."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, while casecal's own handler is in place: it unwinds like Ctrl-C (files in
+    place are named, temporary ones removed, worker processes stopped) instead of ending
+    the process where it stands."""

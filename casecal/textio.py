@@ -10,13 +10,12 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import signal
 import stat
 import sys
 import tempfile
-import threading
 from pathlib import Path
 
+from ._signals import held_signals
 from .errors import CalibrationError
 
 
@@ -25,25 +24,32 @@ def read_text(path, what: str) -> str:
 
     Raises `CalibrationError` with one line for a missing, unreadable or binary file.
     """
-    if str(path) == "-":
-        data = sys.stdin.buffer.read()
-    else:
-        p = Path(path)
-        if not p.exists():
-            raise CalibrationError(f"{what} {str(path)!r} does not exist; check the path")
-        if p.is_dir():
-            raise CalibrationError(f"{what} {str(path)!r} is a folder; give a file")
-        try:
-            with open(p, "rb") as fh:  # pipes and process substitutions too
-                data = fh.read()
-        except OSError as exc:
-            raise CalibrationError(f"cannot read {what} {str(path)!r}: {exc.strerror}") from None
+    data = read_bytes(path, what)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise CalibrationError(
             f"{what} {str(path)!r} is not UTF-8 text; save it as UTF-8 (CSV or TOML)"
         ) from None
+
+
+def read_bytes(path, what: str) -> bytes:
+    """The bytes of a file (``"-"``: standard input; pipes and process substitutions too).
+
+    Raises `CalibrationError` with one line for a missing, unreadable file or a folder.
+    """
+    if str(path) == "-":
+        return sys.stdin.buffer.read()
+    p = Path(path)
+    if not p.exists():
+        raise CalibrationError(f"{what} {str(path)!r} does not exist; check the path")
+    if p.is_dir():
+        raise CalibrationError(f"{what} {str(path)!r} is a folder; give a file")
+    try:
+        with open(p, "rb") as fh:
+            return fh.read()
+    except OSError as exc:
+        raise CalibrationError(f"cannot read {what} {str(path)!r}: {exc.strerror}") from None
 
 
 def write_atomic(path, text: str) -> None:
@@ -57,12 +63,14 @@ def write_together(files) -> None:
     Each text goes to a temporary file beside its target first
     (``.NAME.casecal-<pid>-XXXXXXXX.tmp``); only when all are written are they renamed into
     place, in the order given (put the authoritative file last). A failure while writing
-    (a full disk, a folder that is not writable) changes no target. Files get the mode a
-    new file gets under the user's umask, and a target that is a symbolic link is written
-    through: the file it points to is replaced. A character device or a FIFO (``/dev/null``,
-    ``/dev/stdout``, a named pipe, or a link to one) is written into, as the shell's ``>``
-    does, never replaced. Temporary files that killed runs left beside a target are removed
-    (only names of the pattern above whose process no longer runs).
+    (a full disk, a folder that is not writable) changes no target. A new file gets the mode
+    of the user's umask, a replaced one keeps its own, and a target that is a symbolic link
+    is written through: the file it points to is replaced. A character device or a
+    FIFO (``/dev/null``, a named pipe, or a link to one) is written into, as the shell's
+    ``>`` does, never replaced; ``/dev/stdout``, ``/dev/stderr`` and ``/dev/fd/N`` are
+    written into the open descriptor (``>> log`` appends). A read-only file is refused,
+    as the shell refuses it. Temporary files that killed runs left beside a target are
+    removed (only names of the pattern above whose process no longer runs on this host).
 
     Each file is recorded (see `recording`) the moment its rename is done, so an
     interrupt can say truly what was written.
@@ -81,15 +89,15 @@ def write_together(files) -> None:
     try:
         targets = [(_target(path), text) for path, text in files]
         for target, text in targets:
-            if not _special(target):
+            if not isinstance(target, int) and not _special(target):
                 _sweep(target)
                 staged.append((_stage(target, text), target))
-        for target, text in targets:
-            if _special(target):
+        for target, text in targets:  # may wait for a FIFO's reader: Ctrl-C must work here
+            if isinstance(target, int) or _special(target):
                 _write_through(target, text)
                 _done(renamed, target)
-        for tmp, target in staged:
-            with held_signals():  # a Ctrl-C lands after the rename is recorded, not between
+        with held_signals():  # all renamed and recorded, or (killed) none: never a mix
+            for tmp, target in staged:
                 os.replace(tmp, target)
                 _done(renamed, target)
     except OSError as exc:
@@ -124,43 +132,41 @@ def record(path) -> None:
         _RECORD[-1].append(str(path))
 
 
-@contextlib.contextmanager
-def held_signals():
-    """Hold Ctrl-C and SIGTERM back until the block is done: an interrupt comes after
-    the block, never inside it. (Python handles signals in its main thread only, and
-    any thread may receive them, so the handlers are swapped, not the signal mask.)"""
-    held = (signal.SIGINT, signal.SIGTERM)
-    if threading.current_thread() is not threading.main_thread() or any(
-        signal.getsignal(n) is None
-        for n in held  # set outside Python: cannot be put back
-    ):
-        yield
-        return
-    caught: list[int] = []
-    previous = {}
-    for signum in held:
-        previous[signum] = signal.signal(signum, lambda n, _: caught.append(n))
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        for signum in caught:  # now as it would have been handled
-            handler = previous[signum]
-            if callable(handler):
-                handler(signum, None)
-            elif handler == signal.SIG_DFL:
-                signal.raise_signal(signum)
+def _done(renamed: list[str], target) -> None:
+    name = DESCRIPTORS.get(target, f"/dev/fd/{target}") if isinstance(target, int) else target
+    renamed.append(str(name))
+    record(name)
 
 
-def _done(renamed: list[str], target: Path) -> None:
-    renamed.append(str(target))
-    record(target)
+DESCRIPTORS = {1: "/dev/stdout", 2: "/dev/stderr"}
+
+_OPEN_DESCRIPTOR = re.compile(
+    r"/dev/(?P<std>stdout|stderr)|/dev/fd/(?P<fd>\d+)|/proc/(?P<pid>self|\d+)/fd/(?P<pfd>\d+)"
+)
 
 
-def _target(path) -> Path:
+def _descriptor(path: str) -> int | None:
+    """The open descriptor of this process that `path` names (``/dev/stdout``,
+    ``/dev/fd/N``, ``/proc/self/fd/N``), or None. Written through the descriptor itself:
+    resolving the link would rename over the file the shell opened (``>> log``)."""
+    match = _OPEN_DESCRIPTOR.fullmatch(os.path.normpath(path))
+    if not match:
+        return None
+    if match["std"]:
+        return 1 if match["std"] == "stdout" else 2
+    if match["fd"]:
+        return int(match["fd"])
+    if match["pid"] != "self" and int(match["pid"]) != os.getpid():
+        return None  # another process's: an ordinary path
+    return int(match["pfd"])
+
+
+def _target(path) -> Path | int:
     if not str(path).strip():
         raise CalibrationError("the output file name is empty; give a file name")
+    fd = _descriptor(str(path))
+    if fd is not None:
+        return fd
     path = Path(path)
     if path.is_symlink():
         path = path.resolve()  # write through the link, keep the link itself
@@ -169,6 +175,10 @@ def _target(path) -> Path:
     if path.exists() and not path.is_file() and not _special(path):
         raise CalibrationError(
             f"{str(path)!r} is a block device or a socket, not a file; give a file name"
+        )
+    if path.is_file() and not os.access(path, os.W_OK):
+        raise CalibrationError(  # as the shell's `>` would: read-only is the user's word
+            f"{str(path)!r} is read-only; make it writable (chmod u+w) or give another name"
         )
     return path
 
@@ -182,12 +192,19 @@ def _special(path: Path) -> bool:
     return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
 
 
-def _write_through(target: Path, text: str) -> None:
+def _write_through(target: Path | int, text: str) -> None:
     try:
+        if isinstance(target, int):  # the descriptor as the shell opened it (>> appends)
+            data = text.encode("utf-8")
+            for stream in (sys.stdout, sys.stderr):  # what was printed before comes first
+                stream.flush()
+            while data:
+                data = data[os.write(target, data) :]
+            return
         with open(target, "w", encoding="utf-8") as fh:  # a FIFO waits for its reader
             fh.write(text)
     except OSError as exc:
-        exc.filename = str(target)
+        exc.filename = str(target) if not isinstance(target, int) else f"/dev/fd/{target}"
         raise
 
 
@@ -195,9 +212,7 @@ def _stage(target: Path, text: str) -> str:
     """`text` in a temporary file beside `target`, with a new file's mode; its path."""
     try:
         fd, tmp = tempfile.mkstemp(
-            prefix=f".{target.name}.casecal-{os.getpid()}-",
-            suffix=".tmp",
-            dir=target.parent or Path("."),
+            prefix=f".{target.name}.casecal-{os.getpid()}-", suffix=".tmp", dir=target.parent
         )
     except OSError as exc:  # a folder not writable: name the file the user gave
         exc.filename = str(target)
@@ -205,7 +220,7 @@ def _stage(target: Path, text: str) -> str:
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, _mode(target))
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
         exc.filename = str(target)  # the file the user named, not our temporary one
@@ -220,7 +235,7 @@ def _sweep(target: Path) -> None:
     """Remove temporary files of `target` left by casecal runs that were killed."""
     pattern = re.compile(rf"\.{re.escape(target.name)}\.casecal-(\d+)-[A-Za-z0-9_]+\.tmp")
     try:
-        names = os.listdir(target.parent or ".")
+        names = os.listdir(target.parent)
     except OSError:
         return
     for name in names:
@@ -238,6 +253,14 @@ def alive(pid: int) -> bool:
     except (PermissionError, OverflowError):
         return True
     return True
+
+
+def _mode(target: Path) -> int:
+    """The replaced file's own mode (a private file stays private), else a new file's."""
+    try:
+        return stat.S_IMODE(os.stat(target).st_mode)
+    except OSError:
+        return 0o666 & ~_umask()
 
 
 def _umask() -> int:

@@ -231,9 +231,10 @@ def test_ctrl_c_after_a_rename_names_what_is_in_place(
     err = capsys.readouterr().err
     assert code == 130 and err.count("\n") == 1 and err.startswith("casecal: interrupted; ")
     assert "nothing was written" not in err
-    assert str(dev) in err  # the deviations file is renamed first, the robot file last
-    assert (str(out) in err) == (last == "out.toml") == out.exists()
-    assert dev.exists()
+    # the interrupt lands after every rename of the one write, never between two: both
+    # files are in place, whichever rename it came in, and the line names both
+    assert str(dev) in err and str(out) in err
+    assert dev.exists() and out.exists()
 
 
 def test_ctrl_c_while_a_csv_is_parsed_is_an_interrupt(tmp_path, measured, monkeypatch, capsys):
@@ -309,3 +310,55 @@ def _dead_pid() -> int:
         os._exit(0)
     os.waitpid(pid, 0)
     return pid
+
+
+def test_the_sweep_touches_only_folders_of_exactly_our_names(tmp_path, fake_report, capsys):
+    # user folders that look like the sweep's patterns; a name with glob characters
+    mine = {
+        ".rep.old-backup/important.txt": b"keep",
+        ".rep.building-notes-99999/x.txt": b"keep",
+        ".rep.old-99999/no_report_here.txt": b"keep",  # a dead pid, but not a report
+        ".ra.old-1/f.txt": b"keep",  # would match the glob 'r[ab]'
+    }
+    _put(tmp_path, mine)
+    for out in (tmp_path / "rep", tmp_path / "r[ab]"):
+        assert main(["report", "-o", str(out)]) == 0, capsys.readouterr().err
+        _assert_holds(out, fake_report.files)
+    _assert_holds(tmp_path, mine)
+    assert not (tmp_path / "r[ab]" / "f.txt").exists()
+
+
+def test_a_file_saved_into_the_folder_during_the_swap_is_kept(
+    tmp_path, fake_report, capsys, monkeypatch
+):
+    import casecal.report.folder as folder
+
+    out = tmp_path / "rep"
+    assert main(["report", "-o", str(out)]) == 0, capsys.readouterr().err
+    swap = folder._exchange
+
+    def exchange(a, b):  # the user saves a file into the report folder at that moment
+        (Path(b) / "saved_during_publish.txt").write_bytes(b"precious")
+        return swap(a, b)
+
+    monkeypatch.setattr(folder, "_exchange", exchange)
+    assert main(["report", "-o", str(out)]) == 0, capsys.readouterr().err
+    assert (out / "saved_during_publish.txt").read_bytes() == b"precious"
+    _assert_holds(out, fake_report.files)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]
+
+
+@pytest.mark.parametrize("target", [".", "sub/..", ".."])
+def test_report_into_the_folder_you_are_in_is_refused_before_any_study(
+    tmp_path, fake_report, capsys, monkeypatch, target
+):
+    # every target stays inside tmp_path: a regression must not swap a folder of anyone's
+    here = tmp_path / "work" / "inner"
+    (here / "sub").mkdir(parents=True)
+    monkeypatch.chdir(here)
+    fake_report.fail = AssertionError("a study ran")
+    assert main(["report", "-o", target]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("casecal: error: ") and "folder you are in" in err
+    assert err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["inner", "sub", "work"]

@@ -348,8 +348,10 @@ def _numbers(df: pd.DataFrame, column: str, label: str) -> np.ndarray:
     bad = ~np.isfinite(values)
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
+        # a numeric column holds the parsed value: 1e400 reads as inf, so say what it was
+        what = " (infinite, or beyond ±1.8e308)" if np.isinf(values[row]) else ""
         raise CalibrationError(
-            f"{label}: row {row + 2}, column {column!r}: {str(col.iloc[row])!r} is not a "
-            "finite number; fix or remove that row"
+            f"{label}: row {row + 2}, column {column!r}: {str(col.iloc[row])!r}{what} is "
+            "not a finite number; fix or remove that row"
         )
     return values

@@ -7,13 +7,13 @@ import codecs
 import io
 import os
 import re
-import sys
 import warnings
 from pathlib import Path
 
 import pandas as pd
 
 from ..errors import CalibrationError
+from ..textio import read_bytes
 
 CHUNK_ROWS = 20_000
 """Rows parsed at a time: each chunk's columns become numbers before the next is read."""
@@ -42,7 +42,7 @@ def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]
     """
     label = "standard input" if str(path) == "-" else str(path)
     try:
-        data = _read_bytes(path, what)
+        data = read_bytes(path, what)
         _check_text(data, label, what)
         first = data[:65536].split(b"\n", 1)[0]
         sep = next((d for d in ("\t", ";") if d.encode() in first and b"," not in first), ",")
@@ -62,23 +62,6 @@ def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]
     if df.empty:
         raise CalibrationError(f"{label}: the header has no rows below it; add one row per pose")
     return df, label
-
-
-def _read_bytes(path, what: str) -> bytes:
-    """The bytes of a file (``"-"``: standard input), as `casecal.textio.read_text` reads
-    it but not decoded: a str of the whole file would cost its size again."""
-    if str(path) == "-":
-        return sys.stdin.buffer.read()
-    p = Path(path)
-    if not p.exists():
-        raise CalibrationError(f"{what} {str(path)!r} does not exist; check the path")
-    if p.is_dir():
-        raise CalibrationError(f"{what} {str(path)!r} is a folder; give a file")
-    try:
-        with open(p, "rb") as fh:  # pipes and process substitutions too
-            return fh.read()
-    except OSError as exc:
-        raise CalibrationError(f"cannot read {what} {str(path)!r}: {exc.strerror}") from None
 
 
 def _check_text(data: bytes, label: str, what: str) -> None:

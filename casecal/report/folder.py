@@ -31,12 +31,14 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+import re
 import shutil
 import stat
 from pathlib import Path
 
+from .._signals import held_signals
 from ..errors import CalibrationError
-from ..textio import alive, held_signals, record
+from ..textio import alive, record
 
 MANIFEST = ".casecal-report"
 """The hidden file listing, one name a line, what the report in this folder wrote."""
@@ -56,14 +58,17 @@ def building_folder(out: Path) -> Path:
     if out.exists():
         _refuse_foreign(out, {PDF})
     folder = out.parent / f".{out.name}.building-{os.getpid()}"
-    shutil.rmtree(folder, ignore_errors=True)
+    if _ours_to_sweep(folder):
+        shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir()
+    (folder / MANIFEST).touch()  # marks the folder as ours, for a later run's sweep
     return folder
 
 
 def discard(folder: Path) -> None:
     """Remove a build folder whose report failed or was interrupted."""
-    shutil.rmtree(folder, ignore_errors=True)
+    if _ours_to_sweep(Path(folder)):
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def publish(folder: Path, out: Path) -> None:
@@ -72,12 +77,14 @@ def publish(folder: Path, out: Path) -> None:
     out = _resolved(out)
     new = {p.name for p in Path(folder).iterdir()} - {MANIFEST}
     (Path(folder) / MANIFEST).write_text("".join(f"{name}\n" for name in sorted(new)))
+    replaced = {MANIFEST}  # names in `out` the new report replaces or drops
     if out.exists():
         _refuse_foreign(out, new)
         ours = _ours(out)
         for item in out.iterdir():
             if item.name in new or item.name == MANIFEST or (ours and item.name in ours):
-                continue  # the old report's: replaced or dropped
+                replaced.add(item.name)  # the old report's
+                continue
             _carry(item, Path(folder) / item.name)
     with held_signals():  # a Ctrl-C after the swap still says the report was written
         if not out.exists():
@@ -92,14 +99,65 @@ def publish(folder: Path, out: Path) -> None:
             folder = old
         record(out)
     if folder is not None:
-        shutil.rmtree(folder, ignore_errors=True)
+        _clear_old(folder, out, replaced)
+
+
+def _clear_old(old: Path, out: Path, replaced: set[str]) -> None:
+    """Empty the folder that holds the old report after the swap, by name: the old report's
+    files, and what was carried (linked or copied into `out`). Anything else appeared in
+    the old folder while the report was published: it is moved into `out`, or, where `out`
+    has that name, the old folder is kept beside `out` (and said so)."""
+    for item in list(old.iterdir()):
+        if item.name in replaced or os.path.lexists(out / item.name):
+            carried = item.name not in replaced
+            if carried and not _same(item, out / item.name):
+                continue  # not what was carried: kept below
+            if item.is_dir() and not item.is_symlink():
+                shutil.rmtree(item, ignore_errors=True)
+            else:
+                item.unlink(missing_ok=True)
+        else:
+            os.rename(item, out / item.name)
+    try:
+        old.rmdir()
+    except OSError:
+        kept = out.parent / f".{out.name}.kept-{os.getpid()}"
+        os.rename(old, kept)
+        raise CalibrationError(
+            f"the report is in {str(out)!r}; files that changed in it while it was published "
+            f"are kept in {str(kept)!r}: compare them and move what you need"
+        ) from None
+
+
+def _same(a: Path, b: Path) -> bool:
+    """Whether `b` is what `_carry` made of `a`: the same file (a hard link), a copy of the
+    same size and time, a link to the same place, or a folder."""
+    try:
+        sa, sb = os.lstat(a), os.lstat(b)
+    except OSError:
+        return False
+    if stat.S_ISLNK(sa.st_mode):
+        return stat.S_ISLNK(sb.st_mode) and os.readlink(a) == os.readlink(b)
+    if stat.S_ISDIR(sa.st_mode):
+        return stat.S_ISDIR(sb.st_mode)
+    return (sa.st_ino, sa.st_dev) == (sb.st_ino, sb.st_dev) or (
+        sa.st_size == sb.st_size and int(sa.st_mtime) == int(sb.st_mtime)
+    )
 
 
 def _resolved(out) -> Path:
-    """`out`, or the folder a symbolic link `out` points to; refuses anything not a folder."""
-    out = Path(out)
+    """`out` as an absolute path, or the folder a symbolic link `out` points to; refuses
+    anything not a folder, and the working folder or one above it (the swap would move the
+    folder the user is in, and the build folder would be copied into itself)."""
+    out = Path(os.path.abspath(out))
     if out.is_symlink():
         out = out.resolve()
+    here = Path(os.path.abspath(os.getcwd()))
+    if out == here or out in here.parents or not out.name:
+        raise CalibrationError(
+            f"-o {str(out)!r} is the folder you are in (or one above it); the report replaces "
+            "its folder as a whole: give a folder for it, e.g. -o reports"
+        )
     if out.exists() and not out.is_dir():
         raise CalibrationError(
             f"{str(out)!r} is not a folder (a file, a device or a FIFO); "
@@ -168,17 +226,31 @@ def _exchange(a: Path, b: Path) -> bool:
     return done == 0
 
 
+SWEPT = re.compile(r"\.(?P<name>.+)\.(?P<kind>building|old)-(?P<pid>\d+)")
+"""Build folders (and old reports of the two-rename fallback) that runs leave beside `out`."""
+
+
 def _sweep(out: Path) -> None:
-    """Remove build folders of report runs that are no longer running."""
-    for folder in out.parent.glob(f".{out.name}.building-*"):
-        try:
-            pid = int(folder.name.rsplit("-", 1)[1])
-        except ValueError:
+    """Remove build folders of report runs that are no longer running, and put back an old
+    report a killed fallback swap left aside. Only folders of exactly our names are
+    touched, and only those holding our list (`MANIFEST`) or a report PDF are removed."""
+    for name in os.listdir(out.parent):
+        match = SWEPT.fullmatch(name)
+        if not match or match["name"] != out.name:
             continue
-        if pid == os.getpid() or not alive(pid):
+        folder, pid = out.parent / name, int(match["pid"])
+        if pid != os.getpid() and alive(pid):
+            continue
+        if match["kind"] == "old" and not out.exists() and folder.is_dir():
+            os.rename(folder, out)  # killed between the fallback's two renames: it comes back
+        elif _ours_to_sweep(folder):
             shutil.rmtree(folder, ignore_errors=True)
-    for folder in out.parent.glob(f".{out.name}.old-*"):
-        if out.exists():
-            shutil.rmtree(folder, ignore_errors=True)
-        else:  # killed between the two renames of the fallback: the old report comes back
-            os.rename(folder, out)
+
+
+def _ours_to_sweep(folder: Path) -> bool:
+    """A real folder (not a link) that a report run made: it holds our list or a PDF."""
+    return (
+        folder.is_dir()
+        and not folder.is_symlink()
+        and ((folder / MANIFEST).is_file() or (folder / PDF).is_file())
+    )

@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from ..errors import CalibrationError
+from ..errors import CalibrationError, Terminated
 
 EXECUTORS = ("processes", "serial", "dask")
 
@@ -198,11 +198,6 @@ def check_scheduler(address: str) -> str:
             "address and a port from 1 to 65535); give e.g. --scheduler tcp://localhost:8786"
         )
     return text
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM while local workers run: unwinds like Ctrl-C (the workers are stopped, the
-    command says it was interrupted) instead of killing the parent alone."""
 
 
 def _on_sigterm(signum, frame):
