@@ -369,8 +369,7 @@ def _cmd_report(args: argparse.Namespace) -> None:
     from .report import build_report  # a leaf: matplotlib only when a report is asked for
 
     executor = "dask" if args.scheduler else args.executor
-    _check_writable_dir(args.output)
-    build_report(
+    build_report(  # checks its folder before any study, and makes it only when it is done
         args.output,
         quick=args.quick,
         executor=executor,
@@ -831,6 +830,7 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _one_line_warning
     with recording() as written, sigterm_unwinds():  # written: as each file is in place
         try:
+            cli_args.check_outputs(args)
             args.func(args)
         except CalibrationError as exc:
             print(f"casecal: error: {exc}", file=sys.stderr)

@@ -40,3 +40,39 @@ def scheduler(text: str) -> str:
         return check_scheduler(text)
     except CalibrationError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+OUTPUTS = {"output": "-o", "deviations_out": "--deviations-out"}
+"""The options that name files a command writes (``report -o`` names a folder)."""
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse, before any work, an output file that is one of the command's input files
+    (writing it would replace the user's measurements or targets) or another output's
+    file (one would silently replace the other)."""
+    outputs = [(flag, getattr(args, dest, None)) for dest, flag in OUTPUTS.items()]
+    outputs = [(flag, str(path)) for flag, path in outputs if path and str(path) != "-"]
+    seen: dict[str, str] = {}
+    for flag, path in outputs:
+        key = os.path.realpath(path)
+        if key in seen:
+            raise CalibrationError(
+                f"{seen[key]} and {flag} both name {path!r}: one file would replace the "
+                "other; give each its own name"
+            )
+        seen[key] = flag
+        for dest, value in vars(args).items():
+            if dest in OUTPUTS or dest == "func" or not isinstance(value, str):
+                continue
+            if value != "-" and _same_file(path, value):
+                raise CalibrationError(
+                    f"{flag} {path!r} is also the file read as {dest.replace('_', ' ')}: "
+                    "writing it would replace that input; give the output another name"
+                )
+
+
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return os.path.isfile(b) and os.path.samefile(a, b)
+    except OSError:  # `a` does not exist yet: a new file is no input
+        return False

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
+from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -73,3 +76,36 @@ def write_toml(tmp_path):
         return path
 
     return write
+
+
+@pytest.fixture
+def fake_report(monkeypatch):
+    """`casecal report` with the studies replaced by a few files written at once: the
+    folder handling is the real one. Set `.files` to choose what the next report writes;
+    `.fail` to an exception the studies raise."""
+    import casecal.report as rep
+    import casecal.report.pdf as pdf
+
+    class Fake:
+        files: ClassVar = {"fig1.png": b"new figure", "table1.csv": b"a,b\n1,2\n"}
+        fail = None
+
+    def run_studies(names, out, quick, run, log=None):
+        if Fake.fail is not None:
+            raise Fake.fail
+        for name, data in Fake.files.items():
+            (Path(out) / name).write_bytes(data)
+        return []
+
+    monkeypatch.setattr(rep, "run_studies", run_studies)
+
+    class Runner(contextlib.nullcontext):
+        def __enter__(self):
+            return self
+
+        def check_reachable(self):
+            pass
+
+    monkeypatch.setattr(rep, "study_runner", lambda *a, **k: Runner())
+    monkeypatch.setattr(pdf, "write_pdf", lambda path, *a: Path(path).write_bytes(b"new") and 0)
+    return Fake

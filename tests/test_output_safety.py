@@ -14,7 +14,6 @@ import os
 import signal
 import stat
 from pathlib import Path
-from typing import ClassVar
 
 import pytest
 
@@ -38,30 +37,6 @@ def _put(folder: Path, files: dict) -> None:
 def _assert_holds(folder: Path, files: dict) -> None:
     for name, data in files.items():
         assert (folder / name).read_bytes() == data, name
-
-
-@pytest.fixture
-def fake_report(monkeypatch):
-    """`casecal report` with the studies replaced by a few files written at once: the
-    folder handling is the real one. Set `.files` to choose what the next report writes;
-    `.fail` to an exception the studies raise."""
-    import casecal.report as rep
-    import casecal.report.pdf as pdf
-
-    class Fake:
-        files: ClassVar = {"fig1.png": b"new figure", "table1.csv": b"a,b\n1,2\n"}
-        fail = None
-
-    def run_studies(names, out, quick, run, log=None):
-        if Fake.fail is not None:
-            raise Fake.fail
-        _put(Path(out), Fake.files)
-        return []
-
-    monkeypatch.setattr(rep, "run_studies", run_studies)
-    monkeypatch.setattr(rep, "study_runner", lambda *a, **k: contextlib.nullcontext(None))
-    monkeypatch.setattr(pdf, "write_pdf", lambda path, *a: Path(path).write_bytes(b"new") and 0)
-    return Fake
 
 
 def test_report_keeps_the_users_files(tmp_path, fake_report, capsys):

@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pandas as pd
 
-from casecal.report import PDF_TABLES, run_studies, study_runner
+from casecal.report import OUTPUTS, PDF_TABLES, run_studies, study_runner
 from casecal.report.pdf import Layout, write_pdf
 from casecal.report.studies_paper import PAPER_TABLE1
 
@@ -19,6 +19,8 @@ def test_quick_report(tmp_path):
         quick=True,
         run=study_runner("serial", progress=False),
     )
+    # what the studies wrote is what the report refuses up front where a user's file has it
+    assert {p.name for p in tmp_path.iterdir()} <= OUTPUTS
     layout = Layout()
     n = write_pdf(tmp_path / "r.pdf", "test", ["settings"], results, PDF_TABLES, layout)
     assert n >= 8

@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from ..errors import CalibrationError
 from .common import StudyResult, style
 from .folder import building_folder, discard, publish
 from .pose_count import pose_count_sweep
@@ -46,6 +47,37 @@ NAMES = {
 }
 """Each study in words, as ``casecal report --help`` and the title page name them."""
 PDF_TABLES = {"table1", "scara_blind_spots", "six_axis_observability"}
+OUTPUTS = frozenset(
+    {
+        "casecal-report.pdf",
+        "calibrate_until.png",
+        "calibrate_until_runs.csv",
+        "compliance.png",
+        "compliance_trials.csv",
+        "noise_sweep.png",
+        "noise_trials.csv",
+        "optimal_poses.png",
+        "optimal_poses_trials.csv",
+        "planar_arms.csv",
+        "planar_arms.png",
+        "pose_count_error.png",
+        "pose_count_observability.png",
+        "pose_count_trials.csv",
+        "relative_measurements.png",
+        "relative_trials.csv",
+        "residual_histograms.png",
+        "scara_blind_spots.csv",
+        "scara_singular_values.png",
+        "singular_spectra.png",
+        "six_axis_beta.png",
+        "six_axis_observability.csv",
+        "six_axis_trials.csv",
+        "table1.csv",
+        "table1_bars.png",
+    }
+)
+"""The names the studies write, refused up front where a file of the user's holds one
+(`casecal.report.folder.publish` checks, at the end, what they did write)."""
 
 
 def study_runner(executor: str = "processes", workers=None, scheduler=None, progress: bool = True):
@@ -114,11 +146,18 @@ def build_report(
     Path of the PDF.
     """
     out = Path(out)
-    folder = building_folder(out)  # swapped in whole at the end (casecal.report.folder)
+    folder = building_folder(out, OUTPUTS)  # swapped in whole at the end (report.folder)
     try:
         n = _build(folder, quick, executor, workers, scheduler, progress, log)
         publish(folder, out)
-    except BaseException:  # a failure, a full disk, Ctrl-C: no half-built folder is left
+    except OSError as exc:  # a full disk: say where, and that nothing changed
+        discard(folder)
+        raise CalibrationError(
+            f"cannot write the report beside {str(out)!r}: {exc.strerror or exc}; "
+            f"{'the report there is unchanged' if out.exists() else 'nothing was written'} "
+            "(free some space, or give another folder with -o)"
+        ) from None
+    except BaseException:  # a failure, Ctrl-C: no half-built folder is left
         discard(folder)
         raise
     pdf = out / "casecal-report.pdf"
@@ -139,6 +178,7 @@ def _build(folder: Path, quick, executor, workers, scheduler, progress, log) -> 
 
     t0 = time.perf_counter()
     with study_runner(executor, workers, scheduler, progress) as run:
+        run.check_reachable()
         results = run_studies(list(STUDIES), folder, quick, run, log)
     elapsed = time.perf_counter() - t0
     settings = [

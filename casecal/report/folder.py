@@ -46,17 +46,23 @@ MANIFEST = ".casecal-report"
 PDF = "casecal-report.pdf"
 
 
-def building_folder(out: Path) -> Path:
+def building_folder(out: Path, names=()) -> Path:
     """A new, empty folder beside `out` to build the report in (stale ones removed).
 
-    Refuses, before any work, an `out` that is not a folder, or that holds a
-    ``casecal-report.pdf`` the report did not write.
+    Refuses, before any work, an `out` that is not a folder or whose parent folder does not
+    exist, and one that holds a file the report did not write under one of `names` (the
+    names the report will write, as far as known: `publish` checks what it did write).
+    `out` itself is only made when the report is published.
     """
     out = _resolved(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    if not out.parent.is_dir():
+        raise CalibrationError(
+            f"cannot make the report folder {str(out)!r}: {str(out.parent)!r} does not exist "
+            "either (check the path, or create the folders first)"
+        )
     _sweep(out)
     if out.exists():
-        _refuse_foreign(out, {PDF})
+        _refuse_foreign(out, {PDF, *names})
     folder = out.parent / f".{out.name}.building-{os.getpid()}"
     if _ours_to_sweep(folder):
         shutil.rmtree(folder, ignore_errors=True)
@@ -152,8 +158,9 @@ def _resolved(out) -> Path:
     out = Path(os.path.abspath(out))
     if out.is_symlink():
         out = out.resolve()
-    here = Path(os.path.abspath(os.getcwd()))
-    if out == here or out in here.parents or not out.name:
+    # through links too: the folder the user is in must not be swapped away from under them
+    real, here = Path(os.path.realpath(out)), Path(os.path.realpath(os.getcwd()))
+    if real == here or real in here.parents or not out.name:
         raise CalibrationError(
             f"-o {str(out)!r} is the folder you are in (or one above it); the report replaces "
             "its folder as a whole: give a folder for it, e.g. -o reports"
@@ -233,17 +240,17 @@ SWEPT = re.compile(r"\.(?P<name>.+)\.(?P<kind>building|old)-(?P<pid>\d+)")
 def _sweep(out: Path) -> None:
     """Remove build folders of report runs that are no longer running, and put back an old
     report a killed fallback swap left aside. Only folders of exactly our names are
-    touched, and only those holding our list (`MANIFEST`) or a report PDF are removed."""
+    touched, and only those holding our list (`MANIFEST`) or a report PDF."""
     for name in os.listdir(out.parent):
         match = SWEPT.fullmatch(name)
         if not match or match["name"] != out.name:
             continue
         folder, pid = out.parent / name, int(match["pid"])
-        if pid != os.getpid() and alive(pid):
+        if (pid != os.getpid() and alive(pid)) or not _ours_to_sweep(folder):
             continue
-        if match["kind"] == "old" and not out.exists() and folder.is_dir():
+        if match["kind"] == "old" and not out.exists():
             os.rename(folder, out)  # killed between the fallback's two renames: it comes back
-        elif _ours_to_sweep(folder):
+        else:
             shutil.rmtree(folder, ignore_errors=True)
 
 

@@ -143,6 +143,27 @@ class Executor:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    def check_reachable(self, timeout: float = 10.0) -> None:
+        """Connect to the scheduler address once, now, so that an address nothing answers
+        at is said before any work, not after the first studies; no-op without one."""
+        if not isinstance(self.scheduler, str):
+            return
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            raise CalibrationError(
+                "the dask executor needs dask.distributed: pip install 'casecal[distributed]'"
+            ) from None
+        try:
+            Client(self.scheduler, timeout=timeout).close()
+        except (OSError, TimeoutError) as exc:
+            raise CalibrationError(
+                f"no dask scheduler answers at {self.scheduler!r} within {timeout:g} s "
+                f"({' '.join(str(exc).split()) or type(exc).__name__}): start one there "
+                "(dask scheduler), check the address, or leave --scheduler out to run on "
+                "this machine"
+            ) from None
+
     def _dask(self, func, tasks, order):
         try:
             from dask.distributed import Client, LocalCluster, as_completed
