@@ -4,12 +4,14 @@ the memory (`read_table`, used by `casecal.data.files.read_csv`)."""
 from __future__ import annotations
 
 import codecs
+import csv
 import io
 import os
 import re
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from ..errors import CalibrationError
@@ -46,6 +48,7 @@ def read_table(path, what: str = "measurement file") -> tuple[pd.DataFrame, str]
         _check_text(data, label, what)
         first = data[:65536].split(b"\n", 1)[0]
         sep = next((d for d in ("\t", ";") if d.encode() in first and b"," not in first), ",")
+        _check_rows(data, sep, label)
         chunks = _chunks(data, sep, label)
         del data  # the text goes before the chunks are joined: the peak is one of them
         df = pd.concat(chunks, ignore_index=True) if len(chunks) > 1 else chunks[0]
@@ -118,6 +121,7 @@ def _chunks(data: bytes, sep: str, label: str) -> list[pd.DataFrame]:
             with reader:
                 return list(reader)
     except pd.errors.ParserWarning:
+        # `_check_rows` finds these first; this is the parser's word if it counts otherwise
         raise CalibrationError(
             f"{label}: some rows have more fields than the header; check the delimiters "
             "and that every value has a column name"
@@ -133,8 +137,117 @@ def _chunks(data: bytes, sep: str, label: str) -> list[pd.DataFrame]:
             # pandas turns a Ctrl-C that lands in its read of these in-memory bytes (which
             # cannot fail otherwise) into this error: it is an interrupt, not a bad file
             raise KeyboardInterrupt from None
+        counted = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(exc))
+        if counted:  # the parser's line counts blank lines and the header: the file's line
+            header, line, fields = map(int, counted.groups())
+            raise CalibrationError(_uneven_message(label, sep, line, fields, header)) from None
         detail = " ".join(str(exc).split())  # pandas' messages span lines
         raise CalibrationError(f"{label}: not a readable CSV file ({detail})") from None
+
+
+def _check_rows(data: bytes, sep: str, label: str) -> None:
+    """Refuse a row whose field count is not the header's, and a blank line with rows after
+    it, naming the file's line.
+
+    The parser refuses a long row with a message of its own, but fills a short one with
+    empty fields: a value missing in the middle shifts the rest one column left, silently
+    into the wrong columns if the last column is not one casecal reads. It skips blank
+    lines, which would shift every row number a message (and the outlier notes) give.
+    """
+    found = _uneven_quoted(data, sep) if b'"' in data else _uneven(data, sep)
+    if found is None:
+        return
+    line, fields, header = found
+    if fields == 0:
+        name = "FILE" if label == "standard input" else label
+        raise CalibrationError(
+            f"{label}: line {line} is blank; delete the blank lines (e.g. grep -v "
+            f"'^[[:space:]]*$' {name} > clean.csv): messages number the rows by their line"
+        )
+    raise CalibrationError(_uneven_message(label, sep, line, fields, header))
+
+
+def _uneven_message(label: str, sep: str, line: int, fields: int, header: int) -> str:
+    what = {",": "comma", ";": "semicolon", "\t": "tab"}[sep]
+    if fields > header:
+        comma = " (a comma inside a number, e.g. 1,5 for 1.5?)" if sep == "," else ""
+        return (
+            f"{label}: line {line} has {fields} fields, the header {header}: check the "
+            f"delimiters{comma} and that every value has a column name"
+        )
+    return (
+        f"{label}: line {line} has {fields} fields, the header {header}: the row is short "
+        f"(a value or a {what} is missing); give it one value per column"
+    )
+
+
+WINDOW = 1 << 22
+"""Bytes whose lines `_uneven` counts at a time: its arrays stay a few times this."""
+
+
+def _uneven(data: bytes, sep: str) -> tuple[int, int, int] | None:
+    """The first line whose field count differs from the header's, as (line, fields,
+    header fields), fields 0 for a blank line with rows after it; or None.
+
+    For text without quotes, where a field count is one more than the separators: counted
+    with numpy a window of whole lines at a time, as fast as reading.
+    """
+    end = data.find(b"\n")
+    end = len(data) if end < 0 else end
+    if not data[:end].strip():  # the parser would take a later line for the header
+        return (1, 0, 0) if data[end:].strip() else None
+    header = data.count(sep.encode(), 0, end)
+    everything = np.frombuffer(data, np.uint8)
+    blank, done, pos = None, 0, 0  # done: lines before pos
+    while pos < len(data):
+        stop = min(pos + WINDOW, len(data))
+        if stop < len(data):
+            cut = data.rfind(b"\n", pos, stop)
+            stop = cut + 1 if cut >= 0 else data.find(b"\n", stop) + 1 or len(data)
+        window = everything[pos:stop]
+        ends = np.flatnonzero(window == 10)
+        if not len(ends) or ends[-1] != len(window) - 1:
+            ends = np.append(ends, len(window))  # the last line, without its newline
+        starts = np.concatenate(([0], ends[:-1] + 1))
+        seps = np.flatnonzero(window == ord(sep))
+        counts = np.diff(np.searchsorted(seps, ends), prepend=0)
+        odd = np.flatnonzero((counts != header) | (ends - starts <= 1))
+        is_blank = np.zeros(len(ends), bool)
+        for i in odd:
+            if not bytes(window[starts[i] : ends[i]]).strip():
+                is_blank[i] = True
+                blank = blank or done + i + 1
+            elif blank:
+                return blank, 0, header + 1
+            elif counts[i] != header:
+                return done + i + 1, int(counts[i]) + 1, header + 1
+        if blank and not is_blank[max(blank - done - 1, 0) :].all():
+            return blank, 0, header + 1
+        done, pos = done + len(ends), stop
+    return None
+
+
+def _uneven_quoted(data: bytes, sep: str) -> tuple[int, int, int] | None:
+    """`_uneven` for text with quotes, whose fields may hold separators and newlines: read
+    as the parser does, by Python's csv module (slower, and rare in measurement files)."""
+    text = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8-sig", newline="")
+    reader = csv.reader(text, delimiter=sep, skipinitialspace=True)
+    header, blank, line = None, None, 1
+    try:
+        for row in reader:
+            empty = len(row) <= 1 and not "".join(row).strip()
+            if empty:
+                blank = blank or line
+            elif blank:
+                return blank, 0, header or 0
+            elif header is None:
+                header = len(row)
+            elif len(row) != header:
+                return line, len(row), header
+            line = reader.line_num + 1
+    except csv.Error:
+        return None  # the parser says what it makes of it
+    return None
 
 
 def too_big(path, label: str) -> str:

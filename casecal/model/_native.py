@@ -21,6 +21,7 @@ Build folders left behind by a killed compile are swept on the next build.
 from __future__ import annotations
 
 import ctypes
+import errno
 import hashlib
 import json
 import logging
@@ -188,9 +189,9 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int, joint_trig=()):
         return None
     except _CANNOT as exc:
         # every kernel of a read-only cache fails alike: one line per process, not per kernel
-        reason = _reason(exc)
-        message = f"could not compile kernels ({reason}); evaluating with numpy instead"
-        _say_once(message, log.warning, "cache")
+        problem = _cache_problem(exc, lib_path.parent)
+        message = problem or f"could not compile kernels ({_reason(exc)})"
+        _say_once(f"{message}; evaluating with numpy instead", log.warning, "cache")
         return None
     batch = lib.casecal_batch
     batch.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
@@ -236,6 +237,34 @@ def _reason(exc: BaseException) -> str:
     if isinstance(exc, UnicodeDecodeError):
         return "the loader's message is not text"
     return " ".join(str(exc).split())
+
+
+def _cache_problem(exc: BaseException, folder: Path) -> str | None:
+    """What is wrong with the cache `folder` and what to do, if `exc` is about it."""
+    code = getattr(exc, "errno", None)
+    name = getattr(exc, "filename", None)
+    if code is None or isinstance(exc, NotOurs):
+        return None
+    if name is not None:  # about the folder, a file in it, or a folder above it
+        name, top = os.path.abspath(name), str(folder)
+        if os.path.commonpath([name, top]) not in (name, top):
+            return None  # e.g. the compiler, or the system's temporary folder
+    fix = "set CASECAL_CACHE to a writable folder"
+    if code in (errno.EEXIST, errno.ENOTDIR):
+        for path in (folder, *folder.parents):
+            if path.exists() and not path.is_dir():
+                why = (
+                    "is a file, not a folder"
+                    if path == folder
+                    else f"cannot be made: {path} is a file"
+                )
+                return f"kernel cache {folder} {why}; {fix}"
+    if code in (errno.EACCES, errno.EPERM, errno.EROFS):
+        why = "is not writable" if folder.is_dir() else "cannot be made"
+        return f"kernel cache {folder} {why} ({os.strerror(code)}); {fix}"
+    if code in (errno.ENOSPC, errno.EDQUOT):
+        return f"kernel cache {folder}: {os.strerror(code)}; free some space or {fix}"
+    return None
 
 
 def _load(lib_path: Path, digest: str):

@@ -259,7 +259,8 @@ def read_urdf(
     from .robot import Frame, Robot
 
     root, joints = parse(text, label)
-    path, base_link, tip_link = chain_path(joints, base_link, tip_link, label)
+    links = [el.get("name") for el in root.findall("link")]
+    path, base_link, tip_link = chain_path(joints, base_link, tip_link, label, links)
     masses = _link_inertials(root, label)
     out, pending, bodies, since = [], np.eye(4), [], np.eye(4)
 

@@ -94,9 +94,11 @@ def find_loop(joints: list) -> tuple[list[str], list[str]] | None:
     return None
 
 
-def chain_path(joints: list, base_link: str | None, tip_link: str | None, label: str):
+def chain_path(joints: list, base_link: str | None, tip_link: str | None, label: str, links=None):
     """The joints from `base_link` to `tip_link` (defaults in `casecal.model.urdf.read_urdf`),
-    in order, with the two ends; `joints` must pass `check_tree`."""
+    in order, with the two ends; `joints` must pass `check_tree`. `links`: the names the
+    file declares, in its order (default: those its joints name), listed when an end is
+    not one of them."""
     if not joints:
         raise CalibrationError(
             f"{label}: the URDF has no joints: nothing moves; a robot to calibrate needs "
@@ -108,7 +110,8 @@ def chain_path(joints: list, base_link: str | None, tip_link: str | None, label:
             "needs revolute, continuous or prismatic joints"
         )
     by_child = {j.child: j for j in joints}
-    children = {j.parent for j in joints} | {j.child for j in joints}
+    if links is None:
+        links = list(dict.fromkeys(x for j in joints for x in (j.parent, j.child)))
     roots = sorted({j.parent for j in joints} - set(by_child))
     if base_link is None:
         if len(roots) != 1:
@@ -117,16 +120,29 @@ def chain_path(joints: list, base_link: str | None, tip_link: str | None, label:
                 "them (--base-link on the command line)"
             )
         base_link = roots[0]
-    if base_link not in children:
-        raise CalibrationError(
-            f"{label}: no link {base_link!r}; links: {', '.join(sorted(children))}"
-        )
+    _check_named(base_link, "base", links, label)
     if tip_link is None:
         tip_link = _default_tip(joints, by_child, base_link, label)
+    _check_named(tip_link, "tip", links, label)
     path = path_to(tip_link, base_link, by_child)
     if path is None:
         raise CalibrationError(f"{label}: link {tip_link!r} is not below {base_link!r}")
     return path, base_link, tip_link
+
+
+def _check_named(link: str, end: str, links: list, label: str) -> None:
+    """Refuse a chain end the file does not declare, listing (the first of) its links."""
+    if link in links:
+        return
+    shown = ", ".join(links[:SHOWN]) + (f", ... ({len(links)} links)" if len(links) > SHOWN else "")
+    raise CalibrationError(
+        f"{label}: no link {link!r} in the file; its links: {shown}; give one of them with "
+        f"--{end}-link ({end}_link= in Python)"
+    )
+
+
+SHOWN = 12
+"""Links a message lists at most: a generated URDF may hold thousands."""
 
 
 def path_to(link: str, base_link: str, by_child: dict) -> list | None:
