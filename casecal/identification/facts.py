@@ -93,7 +93,10 @@ def gather(
     decrease = fit.columns(free).solve()[1] if free else 0.0
     point_residuals = est.point_residuals(x0)
     q = est.q
-    outliers = outlier_poses(make(out.robot, names=names), settings.w, settings.known)
+    # least squares: judged against the fit without them, which their pull does not drag
+    outliers = outlier_poses(
+        make(out.robot, names=out.estimated), settings.w, settings.known, refit=not robust
+    )
     inliers = _inliers(make(out.robot, names=out.estimated), outliers) if robust else None
     unasked = outside_gain(final.restricted([*out.estimated, *outside]), out.estimated)
     keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
