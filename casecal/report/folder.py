@@ -28,6 +28,7 @@ else (a file, a device, a FIFO) is refused.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
@@ -113,7 +114,8 @@ def _clear_old(old: Path, out: Path, replaced: set[str]) -> None:
     files, and what was carried (linked or copied into `out`). Anything else appeared in
     the old folder while the report was published: it is moved into `out`, or, where `out`
     has that name, the old folder is kept beside `out` (and said so)."""
-    for item in list(old.iterdir()):
+    # the marks of a report folder go last: a kill halfway leaves a folder the sweep knows
+    for item in sorted(old.iterdir(), key=lambda p: p.name in (MANIFEST, PDF)):
         if item.name in replaced or os.path.lexists(out / item.name):
             carried = item.name not in replaced
             if carried and not _same(item, out / item.name):
@@ -246,7 +248,11 @@ def _sweep(out: Path) -> None:
         if not match or match["name"] != out.name:
             continue
         folder, pid = out.parent / name, int(match["pid"])
-        if (pid != os.getpid() and alive(pid)) or not _ours_to_sweep(folder):
+        if pid != os.getpid() and alive(pid):
+            continue
+        if not _ours_to_sweep(folder):
+            with contextlib.suppress(OSError):  # killed before its mark: empty, so removable
+                folder.rmdir()
             continue
         if match["kind"] == "old" and not out.exists():
             os.rename(folder, out)  # killed between the fallback's two renames: it comes back
