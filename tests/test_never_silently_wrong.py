@@ -31,7 +31,11 @@ def check(case):
     )
     if verdict == "refused" and cal is not None:
         # an honest failure says why, in a sentence a user can act on
-        assert cal.message.startswith("failed") and len(cal.message) > 40
+        # (a few poses that stand out lead, as the likelier cause: issue 20)
+        lead = cal.message.startswith(("failed", "1 pose stands out")) or (
+            cal.outliers_lead and " poses stand out" in cal.message.split(";")[0]
+        )
+        assert lead and len(cal.message) > 40, cal.message
 
 
 @settings(max_examples=30, **SETTINGS)

@@ -75,6 +75,9 @@ class Calibration:
         ``log(R_meas R_modelᵀ)`` after calibration, rad, when orientations were measured.
     outliers : tuple of int
         Poses (0-based rows) whose residuals stand out (see `identify`).
+    outliers_lead : bool
+        A failed fit's message leads with `outliers`: they are few (`summary.FEW`), so a
+        gross value in them is the likelier cause than a model error.
     loss : str
         The loss that was minimised.
     iterations : int
@@ -143,6 +146,7 @@ class Calibration:
     start_note: str = ""
     orientation_residuals: np.ndarray | None = None
     outliers: tuple[int, ...] = ()
+    outliers_lead: bool = False
     loss: str = "linear"
     audit: Audit | None = None
     solver_status: int | None = None

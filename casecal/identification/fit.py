@@ -43,7 +43,7 @@ from .rounds import LOSSES, Settings, fit_in_rounds
 from .scale import door, with_size_check
 from .solvers import SOLVERS
 from .start import choose_frame, partial_base_start
-from .summary import stand_out
+from .summary import outliers_lead, stand_out
 
 log = logging.getLogger(__name__)
 
@@ -217,7 +217,8 @@ def identify(
     point_residuals = est.point_residuals(x0)
     checks = with_size_check(audit(got.facts), robot, out.robot, q, y)
     status, message = verdict(checks, out.solver_status, out.message)
-    if status < 0 and got.outliers:  # the likelier cause leads (issue 20)
+    lead = status < 0 and outliers_lead(got.outliers, len(q))
+    if lead:  # the likelier cause leads (issue 20)
         message = f"{stand_out(got.outliers, loss)}; {message}"
 
     calibrated = frame.robot_out(out.robot)
@@ -239,6 +240,7 @@ def identify(
         ).reshape(-1, 3),
         orientation_residuals=frame.vectors_out(est.orientation_residuals(x0)),
         outliers=got.outliers,
+        outliers_lead=lead,
         loss=loss
         if loss == "linear"
         else f"{loss} (scale {loss_scale:g}{' sigma' if known else ' robust sd'})",

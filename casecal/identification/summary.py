@@ -108,6 +108,17 @@ def build_summary(cal: Calibration) -> Summary:
     )
 
 
+FEW = 0.02
+"""At most this fraction of the poses (and at least one) standing out can be gross values
+in some rows; more is the fit's or the model's trouble, not the file's."""
+
+
+def outliers_lead(outliers, n_poses: int) -> bool:
+    """Whether a failed fit's message should lead with the poses that stand out: only a
+    few of them (`FEW`); many are a model error or a stuck fit showing, not gross rows."""
+    return 0 < len(outliers) <= max(1, FEW * n_poses)
+
+
 def stand_out(outliers, loss: str = "linear") -> str:
     """Which poses stand out (file rows: the header is row 1) and what to do about them.
 
@@ -131,7 +142,7 @@ def _notes(cal: Calibration) -> list[str]:
             if cal.audit is not None and cal.audit.failures
             else cal.message
         )
-        cause = f"{stand_out(cal.outliers, cal.loss)}; " if cal.outliers else ""
+        cause = f"{stand_out(cal.outliers, cal.loss)}; " if cal.outliers_lead else ""
         notes.append(f"The fit FAILED: {cause}{reasons}. Do not use these values.")
     if cal.start_note:
         notes.append(cal.start_note)
@@ -145,7 +156,7 @@ def _notes(cal: Calibration) -> list[str]:
     notes += _held_notes(cal)
     if cal.loss != "linear":
         notes.append(f"Robust fit: {cal.loss} loss, by iteratively reweighted least squares.")
-    if cal.outliers and cal.success:  # a failed fit's first note names them
+    if cal.outliers and not cal.outliers_lead:  # else the failure's note names them
         notes.append(f"{stand_out(cal.outliers, cal.loss)}.")
     poor = cal.poorly_determined
     if poor:
