@@ -452,7 +452,14 @@ def robot_for(args: argparse.Namespace, name: str):
     if str(name).lower().endswith((".urdf", ".xacro")):
         ends = {k: getattr(args, k, None) for k in ("base_link", "tip_link")}
         return load_robot(name, **ends)
-    return load_robot(name)
+    robot = load_robot(name)
+    if robot.is_tree:  # a robot file of a tree (several tips): its columns and outputs differ
+        raise CalibrationError(
+            f"{name}: robot {robot.name!r} is a kinematic tree ({len(robot.tips)} tips); the "
+            "command line does not take trees yet: use the Python API (casecal.load_robot, "
+            "identify, save_robot)"
+        )
+    return robot
 
 
 def _fmt(value: float, width: int = 10) -> str:

@@ -6,6 +6,10 @@ One row per pose. Columns (any order; extra columns are kept out of the way and 
   name: ``q1_deg``, ``q1_rad``, ``q3_mm``, ``q3_m``;
 - measured position ``x, y, z`` in m, or ``x_mm, y_mm, z_mm``;
 - several reflectors per pose instead: ``p1_x_mm, p1_y_mm, p1_z_mm, p2_x_mm, …``;
+- a kinematic tree's tips (`casecal.model.tree`) instead: one point per tip, named after
+  its link, ``right_marker_x_mm, right_marker_y_mm, right_marker_z_mm, left_marker_x_mm,
+  …`` (or ``_m``); joints ``q1`` … in the tree's joint order. Every tip is measured at
+  every pose for now: an empty cell in a tip's column is refused with its row;
 - optional tool orientation as a unit quaternion ``qw, qx, qy, qz`` (tool frame in the
   measurement frame);
 - optional noise σ: ``sigma`` (m) or ``sigma_mm``, one isotropic value per row, or per
@@ -67,10 +71,16 @@ def _read_csv(path, robot: Robot) -> Measurements:
     q = read_joints(df, robot, label)
     if robot.inputs:
         q = np.column_stack([q, _inputs(df, robot, label)])
-    y = _positions(df, columns, label)
-    if not any(re.fullmatch(r"(p\d+_)?[xyz]_(mm|m|um)", c) for c in columns):
-        _check_metres(y, robot, label)
-    _check_units(df, robot, q, y, label)
+    if robot.is_tree:
+        y, named = _tip_positions(df, robot, label)
+        if not any(re.search(r"_(mm|m|um)$", c) for c in named):
+            _check_metres(y, robot, label)
+    else:
+        y = _positions(df, columns, label)
+        if not any(re.fullmatch(r"(p\d+_)?[xyz]_(mm|m|um)", c) for c in columns):
+            _check_metres(y, robot, label)
+        named = None
+    _check_units(df, robot, q, y, label, named)
     orientations = _orientations(df, columns, label)
     sigma = np.zeros((len(df), 3))
     if any(c in df for c in ("sigma", "sigma_m", "sigma_mm", "sigma_um")):
@@ -145,10 +155,18 @@ def _check_metres(y: np.ndarray, robot: Robot, label: str) -> None:
         )
 
 
-def _check_units(df: pd.DataFrame, robot: Robot, q: np.ndarray, y: np.ndarray, label: str):
-    """The door check of `casecal.data.units`, worded with this file's column names."""
-    names = [c for c in df.columns if _POINT.match(c) or re.fullmatch(r"[xyz](_(mm|m|um))?", c)]
-    unit = re.fullmatch(r"(?:p\d+_)?[xyz](?:_(mm|m|um))?", names[0]).group(1) or "m"
+def _check_units(
+    df: pd.DataFrame, robot: Robot, q: np.ndarray, y: np.ndarray, label: str, named=None
+):
+    """The door check of `casecal.data.units`, worded with this file's column names (the
+    position columns `named`, when given: a tree's tips')."""
+    if named:
+        names = named
+        found = re.search(r"_(mm|m|um)$", names[0])
+        unit = found.group(1) if found else "m"
+    else:
+        names = [c for c in df.columns if _POINT.match(c) or re.fullmatch(r"[xyz](_(mm|m|um))?", c)]
+        unit = re.fullmatch(r"(?:p\d+_)?[xyz](?:_(mm|m|um))?", names[0]).group(1) or "m"
     shown = ", ".join(names) if len(names) <= 3 else f"{names[0]}, {names[1]}, … {names[-1]}"
     revolute = [i for i, j in enumerate(robot.joints) if j.type == "R"]
     in_degrees = [i for i in revolute if f"q{i + 1}_deg" in df]
@@ -200,6 +218,37 @@ def _positions(df: pd.DataFrame, columns, label: str) -> np.ndarray:
             name, scale = _pick(df, label, [f"p{j}_{axis}"], None)
             y[:, j - 1, k] = _numbers(df, name, label) * scale
     return y
+
+
+_GAPS = ("", "nan", "na", "n/a", "null", "none", "-")
+"""Cells that say a marker was not seen (lower case)."""
+
+
+def _tip_positions(df: pd.DataFrame, robot: Robot, label: str) -> tuple[np.ndarray, list[str]]:
+    """A tree's tips' columns ``{tip}_x`` … (any length unit) -> (N, tips, 3), m, and the
+    columns' names."""
+    y = np.empty((len(df), len(robot.tips), 3))
+    named = []
+    for j, tip in enumerate(robot.tips):
+        for k, axis in enumerate("xyz"):
+            name, scale = _pick(df, label, [f"{tip}_{axis}"], None)
+            col = df[name]
+            if col.dtype.kind in "iuf":
+                gaps = np.isnan(col.to_numpy(dtype=float))
+            else:
+                gaps = col.astype(str).str.strip().str.lower().isin(_GAPS).to_numpy()
+            if gaps.any():
+                first, n = int(np.flatnonzero(gaps)[0]), int(gaps.sum())
+                raise CalibrationError(
+                    f"{label}: row {first + 2}, column {name!r} is empty: tip {tip!r} was not "
+                    f"measured at that pose ({n} row{'s' if n > 1 else ''} like it); every tip "
+                    "must be measured at every pose for now (gaps per marker are not "
+                    "supported yet): remove those rows"
+                )
+            values = _numbers(df, name, label)
+            y[:, j, k] = values * scale
+            named.append(name)
+    return y, named
 
 
 def _orientations(df: pd.DataFrame, columns, label: str) -> np.ndarray | None:
@@ -284,7 +333,17 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
         for k, (name, _) in enumerate(robot.inputs):
             data[name] = measurements.q[:, robot.dof + k]
     points = measurements.points
-    if measurements.positions.ndim == 2:
+    if robot.is_tree:
+        if points.shape[1] != len(robot.tips):
+            raise CalibrationError(
+                f"the measurements have {points.shape[1]} points per pose but robot "
+                f"{robot.name!r} is a tree with {len(robot.tips)} tips; write the "
+                "measurements of this robot"
+            )
+        for j, tip in enumerate(robot.tips):
+            for k, axis in enumerate("xyz"):
+                data[f"{tip}_{axis}_mm"] = points[:, j, k] * 1e3
+    elif measurements.positions.ndim == 2:
         for k, axis in enumerate("xyz"):
             data[f"{axis}_mm"] = points[:, 0, k] * 1e3
     else:

@@ -55,7 +55,8 @@ class Measurements:
         Joint values, rad (R) or m (P).
     positions : ndarray, shape (N, 3) or (N, m, 3)
         Measured positions in the world (instrument) frame, m: one point per pose, or m
-        points (reflectors) per pose in the order of the robot's ``points``.
+        points (reflectors) per pose in the order of the robot's ``points`` (a tree's: one
+        per tip, in the order of its ``tips``).
     sigma : ndarray, shape (N, 3)
         Standard deviation of the position noise per pose and axis, m (every point of a
         pose shares it); a scalar, (3,) or (N,) value is broadcast. Zero means noise-free
@@ -161,9 +162,9 @@ class Measurements:
 def simulate(true_robot: Robot, q, noise=0.0, seed=None, orientation_noise=None) -> Measurements:
     """Measurements of `true_robot` at poses `q`, with isotropic Gaussian noise.
 
-    Measures the robot's ``points`` (or the tool origin when it has none); with
-    `orientation_noise` (rad, may be 0) also the tool frame's rotation, perturbed by a
-    random rotation vector of that standard deviation per axis.
+    Measures the robot's ``points`` (or the tool origin when it has none; a tree's tips,
+    positions (N, tips, 3)); with `orientation_noise` (rad, may be 0) also the tool frame's
+    rotation, perturbed by a random rotation vector of that standard deviation per axis.
 
     Parameters
     ----------
@@ -184,12 +185,16 @@ def simulate(true_robot: Robot, q, noise=0.0, seed=None, orientation_noise=None)
     from ..design.poses import rng_from
 
     q2, _ = check_joint_values(q, true_robot.dof, len(true_robot.inputs))
+    if true_robot.is_tree and orientation_noise is not None:
+        from ..model.kinematics import tree_refusal
+
+        raise tree_refusal("orientation measurements")
     sigma = broadcast_sigma(noise, q2.shape[0])
     rng = rng_from(seed)
     points = true_robot.measured_points(q2)  # (N, m, 3)
     if np.any(sigma > 0):
         points = points + rng.normal(size=points.shape) * sigma[:, None, :]
-    positions = points if true_robot.points else points[:, 0, :]
+    positions = points if true_robot.points or true_robot.is_tree else points[:, 0, :]
     R = None
     if orientation_noise is not None:
         if not isinstance(orientation_noise, int | float) or not orientation_noise >= 0:

@@ -141,9 +141,22 @@ def rotating_residual(robot: Robot, q: np.ndarray, P: np.ndarray) -> float:
     R_i the tool's rotation); 0 when only the wrist turned about a fixed point, 0 also
     when the robot's rotations cannot be had (then nothing is excluded)."""
     try:
-        R = robot.fk(q)[:, :3, :3]
+        T = robot.fk(q)
     except ValueError:  # a robot fk does not serve
         return 0.0
+    if T.ndim == 4 and T.shape[:2] == P.shape[:2]:  # a tree: each tip turns with its own
+        Pc = P - P.mean(axis=0)
+        total = float(np.sum(Pc * Pc))
+        if total <= 0:
+            return 0.0
+        left = 0.0
+        for k in range(T.shape[1]):
+            R = T[:, k, :3, :3]
+            A, rhs = (R - R.mean(axis=0)).reshape(-1, 3), Pc[:, k].reshape(-1)
+            u, *_ = np.linalg.lstsq(A, rhs, rcond=None)
+            left += float(np.sum((rhs - A @ u) ** 2))
+        return math.sqrt(left / total)
+    R = T[:, :3, :3]
     if R.shape != (len(q), 3, 3):
         return 0.0
     A = (R - R.mean(axis=0)).reshape(-1, 3)  # (3N, 3)

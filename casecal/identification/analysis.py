@@ -158,6 +158,10 @@ def observability(
             f"measurement {measurement!r} is not supported; use 'position' or 'pose'"
         )
     q2, _ = check_joint_values(q, robot.dof)
+    if measurement == "pose" and robot.is_tree:
+        from ..model.kinematics import tree_refusal
+
+        raise tree_refusal("orientation measurements (measurement='pose')")
     if measurement == "position":
         J, names = robot.position_jacobian(q2, selection(robot, parameters), deviations=True)
     else:

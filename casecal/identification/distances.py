@@ -109,6 +109,10 @@ def random_pairs(n_poses: int, n_pairs: int, seed=0) -> np.ndarray:
 def simulate_distances(true_robot: Robot, q, pairs, noise=0.0, seed=None) -> DistanceMeasurements:
     """Distances between the tool points of `pairs` of poses of `true_robot`, with noise σ (m)."""
     q2, _ = check_joint_values(q, true_robot.dof)
+    if true_robot.is_tree:
+        from ..model.kinematics import tree_refusal
+
+        raise tree_refusal("distance measurements")
     pairs = np.asarray(pairs)
     if pairs.ndim != 2 or pairs.shape[1] != 2 or not np.issubdtype(pairs.dtype, np.integer):
         raise CalibrationError("pairs must be integer pose indices of shape (P, 2)")
@@ -213,6 +217,10 @@ def identify_distances(
     `Calibration.residuals` has one row per pair (distance residual, m).
     """
     t0 = time.perf_counter()
+    if robot.is_tree:
+        from ..model.kinematics import tree_refusal
+
+        raise tree_refusal("distance measurements")
     if method not in METHODS or method == "ipopt":
         raise CalibrationError("distance identification supports svd, gauss-newton and lm")
     names = selection(robot, parameters)

@@ -144,6 +144,12 @@ def identify(
             f"measurements have {measurements.q.shape[1]} joint values per pose but robot "
             f"{robot.name!r} has {robot.dof} joints{extra}; use the robot the data came from"
         )
+    if robot.is_tree:
+        if measurements.orientations is not None:
+            from ..model.kinematics import tree_refusal
+
+            raise tree_refusal("orientation measurements")
+        _with_points(robot, measurements.n_points)  # one point per tip, before the door
     door(robot, measurements)  # unit slips, before any fit
     q, y = measurements.q, measurements.points  # y: (N, m, 3)
     robot, point_note = _with_points(robot, measurements.n_points)
@@ -196,7 +202,7 @@ def identify(
         method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior, progress
     )
     reference = frames_fitted(make, start, names, settings, e0)
-    frames = frame_parameters(names)
+    frames = frame_parameters(names, robot)
     if reference is start and frames and len(frames) < len(names):
         start_note = f"{start_note} {FALLBACK_NOTE}".strip()
     e_before = point_rms(make(reference, names=names).point_residuals(np.zeros(len(names))))
@@ -396,7 +402,16 @@ def _repeats(q: np.ndarray, y: np.ndarray) -> str:
 
 
 def _with_points(robot: Robot, m: int) -> tuple[Robot, str]:
-    """The robot with as many measured points as the data have (new ones at the origin)."""
+    """The robot with as many measured points as the data have (new ones at the origin);
+    a tree's measured points are its tips."""
+    if robot.is_tree:
+        if m != len(robot.tips):
+            raise CalibrationError(
+                f"the measurements have {m} point{'s' if m > 1 else ''} per pose but robot "
+                f"{robot.name!r} is a tree with {len(robot.tips)} tips "
+                f"({', '.join(robot.tips)}); give one measured point per tip, in that order"
+            )
+        return robot, ""
     if m == 1 and not robot.points:
         return robot, ""
     if robot.points and len(robot.points) != m:

@@ -20,9 +20,11 @@ from .rounds import Settings, fit_in_rounds
 FRAME_PREFIXES = ("base_", "tool_", "point")
 
 
-def frame_parameters(names) -> list[str]:
-    """The asked-for parameters that locate frames rather than the robot's geometry."""
-    return [n for n in names if n.startswith(FRAME_PREFIXES)]
+def frame_parameters(names, robot: Robot | None = None) -> list[str]:
+    """The asked-for parameters that locate frames rather than the robot's geometry: with
+    `robot` a tree, its tips' frames too (where the markers sit)."""
+    tips = tuple(f"{t}." for t in robot.tips) if robot is not None and robot.is_tree else ()
+    return [n for n in names if n.startswith(FRAME_PREFIXES) or (tips and n.startswith(tips))]
 
 
 def frames_fitted(make, start: Robot, names, settings: Settings, e0: float) -> Robot:
@@ -49,7 +51,7 @@ def frames_fitted(make, start: Robot, names, settings: Settings, e0: float) -> R
         calibration is then the frame fit: before it is the start), or when the frame fit
         fails.
     """
-    frames = frame_parameters(names)
+    frames = frame_parameters(names, start)
     if not frames or len(frames) == len(names):
         return start
     plain = dataclasses.replace(

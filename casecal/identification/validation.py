@@ -93,6 +93,8 @@ def refit_frames(robot: Robot, measurements: Measurements) -> tuple[ErrorStats, 
     tool = ("tool_x", "tool_y", "tool_z")
     if measurements.orientations is not None:
         tool += ("tool_rx", "tool_ry", "tool_rz")
+    if robot.is_tree:  # where each tip's marker sits: its position, as a tool's
+        tool += tuple(f"{t}.{c}" for t in robot.tips for c in "xyz")
     frames = [n for n in robot.parameter_names if n.startswith(("base_", "point")) or n in tool]
     try:
         cal = identify(robot, measurements, frames, "gauss-newton")

@@ -57,6 +57,7 @@ _TOP_KEYS = TOP_KEYS | {
     "source",
     "confidence",
     "description",
+    "tips",
 }
 _JOINT_KEYS = {"type", "a", "alpha", "d", "theta", "beta", "limits"}
 _FRAME_KEYS = {"xyz", "rpy"}
@@ -68,7 +69,7 @@ _FLAGS = {"base_link": "--base-link", "tip_link": "--tip-link"}
 def load_robot(
     name_or_path: str | Path,
     base_link: str | None = None,
-    tip_link: str | None = None,
+    tip_link: str | list[str] | tuple[str, ...] | None = None,
     packages: dict[str, str] | None = None,
 ) -> Robot:
     """Load a robot from the catalog by name, or from a TOML or URDF file by path.
@@ -84,6 +85,8 @@ def load_robot(
         (rules in `casecal.model.names`).
     base_link, tip_link : str, optional
         URDF only: the chain's ends (defaults in `casecal.model.urdf.read_urdf`).
+        `tip_link` a list of several links: the tree of the paths to them, each a
+        measured tip (`casecal.model.tree`); a list of one: the chain to it.
     packages : dict of str to str, optional
         xacro only: ROS package name to folder, for ``$(find ...)``.
 
@@ -158,6 +161,16 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
             f"{label}: missing or empty [[joints]]; add one [[joints]] table per joint"
         )
     rows, inertials = split_rows(rows, length, label, _number)
+    parents = ()
+    if "tips" in data:  # a tree (`casecal.model.tree`): its joints say what they hang from
+        from .tree import toml_parents
+
+        if convention != "urdf" or "tool" in data:
+            raise CalibrationError(
+                f'{label}: [[tips]] make a tree, which is convention = "urdf" without a '
+                "[tool] (each tip has its own frame)"
+            )
+        rows, parents = toml_parents(rows, label, _number)
     joints = []
     for i, row in enumerate(rows, start=1):
         where = f"joints[{i}]"
@@ -225,10 +238,16 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
         if beside.is_file():
             calibrated_from = path_text(beside)
     chain = data.get("calibrated_chain", [])
-    if not (
-        isinstance(chain, list) and len(chain) in (0, 2) and all(isinstance(c, str) for c in chain)
-    ):
-        raise CalibrationError(f"{label}: calibrated_chain must be [base_link, tip_link]")
+    if not (isinstance(chain, list) and len(chain) != 1 and all(isinstance(c, str) for c in chain)):
+        raise CalibrationError(
+            f"{label}: calibrated_chain must be [base_link, tip_link] (a tree: [base_link, "
+            "tip, tip, …])"
+        )
+    tips = ()
+    if parents:
+        from .tree import toml_tips
+
+        tips = toml_tips(data, len(joints), length, angle, label, _number)
     robot = Robot(
         name=name,
         inertials=inertials,
@@ -242,6 +261,8 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
         full_name=str(data.get("full_name", "")),
         source=source,
         confidence=str(data.get("confidence", "")),
+        parents=parents,
+        tip_frames=tips,
     )
     return add_terms(robot, data, angle, label, _number, length)
 
@@ -358,7 +379,10 @@ def nominal_of(robot: Robot) -> Robot:
             f"robot {robot.name!r} does not say which nominal robot it was calibrated from "
             "(no calibrated_from); give the nominal robot"
         )
-    ends = dict(zip(("base_link", "tip_link"), robot.calibrated_chain, strict=False))
+    chain = robot.calibrated_chain
+    # a tree's: the base link and its tips
+    chain = (chain[0], list(chain[1:])) if len(chain) > 2 else chain
+    ends = dict(zip(("base_link", "tip_link"), chain, strict=False))
     try:
         return load_robot(robot.calibrated_from, **ends)
     except CalibrationError as exc:

@@ -36,7 +36,7 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None, joint_t
     """Walk `structure` from `base` with effective joint variables `q_eff` (list of SX);
     `after[i]`, when given and not None, is applied after joint i's link; `joint_trig[i]`,
     when given and not None, is (cos, sin) of revolute joint i's angle (offset included)."""
-    from .kinematics import frame_transform, joint_motion, link_transform, rotation_trig
+    from .kinematics import link_transform
 
     T, axes, points, bodies = base, [], [], []
     after = after or [None] * len(q_eff)
@@ -51,19 +51,11 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None, joint_t
             passive,
             strict=True,
         ):
-            for p_name, p_type, p_axis, master, multiplier, offset in before:
-                xyz = [P[f"{p_name}.{c}"] for c in "xyz"]
-                rpy = rotation_trig(trig, [f"{p_name}.{c}" for c in ("roll", "pitch", "yaw")])
-                T = T @ frame_transform(xyz, rpy)
-                T = T @ joint_motion(p_type, p_axis, multiplier * q_eff[master] + offset)
-            xyz = [P[f"{name}.{c}"] for c in "xyz"]
-            origin = T @ frame_transform(
-                xyz, rotation_trig(trig, [f"{name}.{c}" for c in ("roll", "pitch", "yaw")])
+            origin, T = _urdf_joint(
+                T, (jt, name, axis, q, before), q_eff, P, trig, joint_trig[len(bodies)]
             )
             axes.append(origin[:3, :3] @ ca.DM(axis))
             points.append(origin[:3, 3])
-            angle = q + P[f"{name}.offset"] if jt == "R" else q
-            T = origin @ joint_motion(jt, axis, angle, joint_trig[len(bodies)])
             T = T if after[len(bodies)] is None else T @ after[len(bodies)]
             bodies.append(T)
         return Walk(T, axes, points, bodies)
@@ -87,3 +79,56 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None, joint_t
         T = link_after if after[i - 1] is None else link_after @ after[i - 1]
         bodies.append(T)
     return Walk(T, axes, points, bodies)
+
+
+def _urdf_joint(T, joint, q_eff, P: dict, trig: dict, cs=None):
+    """One actuated URDF joint walked from the frame `T` it hangs from: its mimic joints,
+    then its origin and motion. `joint` is (type, name, axis, q, mimic joints before it);
+    `cs` as `walk`'s `joint_trig[i]`. Returns (its origin, the frame it moves)."""
+    from .kinematics import frame_transform, joint_motion, rotation_trig
+
+    jt, name, axis, q, before = joint
+    for p_name, p_type, p_axis, master, multiplier, offset in before:
+        xyz = [P[f"{p_name}.{c}"] for c in "xyz"]
+        rpy = rotation_trig(trig, [f"{p_name}.{c}" for c in ("roll", "pitch", "yaw")])
+        T = T @ frame_transform(xyz, rpy)
+        T = T @ joint_motion(p_type, p_axis, multiplier * q_eff[master] + offset)
+    xyz = [P[f"{name}.{c}"] for c in "xyz"]
+    origin = T @ frame_transform(
+        xyz, rotation_trig(trig, [f"{name}.{c}" for c in ("roll", "pitch", "yaw")])
+    )
+    angle = q + P[f"{name}.offset"] if jt == "R" else q
+    return origin, origin @ joint_motion(jt, axis, angle, cs)
+
+
+def walk_tree(structure, base: ca.SX, q_eff, P: dict, trig: dict, joint_trig=None) -> ca.SX:
+    """The world poses of a tree's tips (`structure.tips`), stacked: (4 · tips) × 4.
+
+    Each joint is walked once, from the frame of the joint it hangs from
+    (`structure.parents`; the base for -1), so a path the tips share is one piece of the
+    graph: ``T_joint = T_parent · origin · motion`` and ``T_tip = T_parent · tip frame``.
+    """
+    from .kinematics import frame_transform, rotation_trig
+
+    joint_trig = joint_trig or [None] * len(q_eff)
+    passive = structure.passive or ((),) * len(q_eff)
+    moved: list = []  # per joint, the frame it moves
+    for i, joint in enumerate(
+        zip(
+            structure.joint_types,
+            structure.joint_names,
+            structure.axes,
+            q_eff,
+            passive,
+            strict=True,
+        )
+    ):
+        parent = structure.parents[i]
+        T = base if parent < 0 else moved[parent]
+        moved.append(_urdf_joint(T, joint, q_eff, P, trig, joint_trig[i])[1])
+    tips = []
+    for name, parent in structure.tips:
+        xyz = [P[f"{name}.{c}"] for c in "xyz"]
+        rpy = rotation_trig(trig, [f"{name}.{c}" for c in ("roll", "pitch", "yaw")])
+        tips.append((base if parent < 0 else moved[parent]) @ frame_transform(xyz, rpy))
+    return ca.vertcat(*tips)

@@ -186,6 +186,10 @@ def compensate(
         another tool, or for ``"instrument"`` a nominal base frame that is not where the
         instrument saw the robot.
     """
+    if calibrated.is_tree or (nominal is not None and nominal.is_tree):
+        from .kinematics import tree_refusal
+
+        raise tree_refusal("compensation (joint values for several tips at once)")
     if frame not in FRAMES:
         raise CalibrationError(
             f"unknown compensation frame {frame!r}; use 'robot' (targets in the robot's base "

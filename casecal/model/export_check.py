@@ -6,7 +6,8 @@ for the instrument's frame), the robot the file reads back as when the writer is
 (`held`: the reference less what the format cannot hold), and how to read the text back
 with casecal's own reader (the same chain ends, the same tool frame). `verified` reads the
 text back in memory and compares forward kinematics at `N_POSES` poses across the joint
-ranges (seed 0): the tool frame's origin and orientation and every measured point.
+ranges (seed 0): the tool frame's origin and orientation and every measured point (a
+tree's: every tip's frame).
 
 - read-back ≠ held (beyond `EXACT`): a bug in a writer; `CalibrationError`, nothing written;
 - reference ≠ read-back: a real loss, stated in mm and degrees with its reasons;
@@ -146,15 +147,19 @@ def difference(a, b, q: np.ndarray) -> Difference:
     """The largest difference of robot `b` from robot `a` at poses `q` (N, dof).
 
     Position: the tool frame's origin and, for robots with measured points, each point
-    (the two must have as many); orientation: the angle of ``R_a(q)ᵀ R_b(q)``.
+    (the two must have as many); orientation: the angle of ``R_a(q)ᵀ R_b(q)``. A tree's:
+    every tip's frame (the two must have the same tips).
     """
-    if len(a.points) != len(b.points):
+    if len(a.points) != len(b.points) or a.is_tree != b.is_tree:
+        return Difference(np.inf, np.inf)
+    if a.is_tree and a.tips != b.tips:  # a serial robot's one tip may be named otherwise
         return Difference(np.inf, np.inf)
     position, angle = 0.0, 0.0
     # batches below the compile threshold: a one-off check should not compile a C kernel
     # for every structure it meets
     for rows in np.array_split(q, -(-len(q) // (COMPILE_MIN_POSES - 1))):
-        Ta, Tb = a.fk(rows), b.fk(rows)
+        # a tree's tips' frames (N, tips, 4, 4) as N · tips frames: each compared
+        Ta, Tb = a.fk(rows).reshape(-1, 4, 4), b.fk(rows).reshape(-1, 4, 4)
         gap = [np.linalg.norm(Ta[:, :3, 3] - Tb[:, :3, 3], axis=-1)]
         if a.points:
             gap.append(
@@ -209,6 +214,7 @@ def verified(path, text: str, notes, contract: Contract) -> Export:
             parts.insert(0, (difference(geometry, contract.held, q), contract.tool_reason))
         reasons = [reason for part, reason in parts if not _negligible(part)]
         where = "at the tool and the measured points" if reference.points else "at the tool"
+        where = "at the tips" if reference.is_tree else where
         statement = f"this file loses up to {loss} {where}: " + "; ".join(
             reasons or ["what it cannot hold"]
         )

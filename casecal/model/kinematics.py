@@ -48,6 +48,7 @@ and 3 parallel) it is ``beta2``.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -57,9 +58,10 @@ from typing import NamedTuple
 import casadi as ca
 import numpy as np
 
+from ..errors import CalibrationError
 from . import _trig
 from ._evaluate import BUILDING, COMPILE_MIN_POSES, HOT_CALLS, Evaluator, write_into
-from .chainwalk import walk
+from .chainwalk import walk, walk_tree
 from .parameters import parameter_names, urdf_parameter_names
 from .rotation_chart import is_anchored
 
@@ -110,6 +112,12 @@ class Structure:
     inputs : tuple of (str, float)
         Per-pose inputs beyond the joints (a payload, a temperature) that error terms read,
         with the reference value used where a pose gives none.
+    parents : tuple of int
+        A tree only (`casecal.model.tree`): per joint, the 0-based index of the joint it
+        hangs from (-1: the base). Empty for a serial chain.
+    tips : tuple of (str, int)
+        A tree only: per measured tip, its link's name and the joint it hangs from. Empty
+        for a serial chain, whose one measured point is the tool frame's (or `n_points`).
     """
 
     convention: str
@@ -122,6 +130,23 @@ class Structure:
     gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
     passive: tuple = ()
     inputs: tuple = ()
+    parents: tuple[int, ...] = ()
+    tips: tuple[tuple[str, int], ...] = ()
+
+    def __repr__(self) -> str:
+        # the compiled kernels' cache key (`casecal.model._native`): a serial chain's is
+        # what it was before trees, so that the fields of trees cost it nothing
+        shown = [
+            f"{f.name}={getattr(self, f.name)!r}"
+            for f in dataclasses.fields(self)
+            if f.name not in ("parents", "tips") or getattr(self, f.name)
+        ]
+        return f"Structure({', '.join(shown)})"
+
+    @property
+    def n_tips(self) -> int:
+        """Measured tips: those of a tree, 1 for a serial chain."""
+        return max(len(self.tips), 1)
 
     @property
     def n_inputs(self) -> int:
@@ -135,7 +160,12 @@ class Structure:
         extra = tuple(n for t in self.terms for n in t.parameters)
         if self.convention == "urdf":
             names = urdf_parameter_names(
-                self.joint_names, self.joint_types, self.n_points, self.passive
+                self.joint_names,
+                self.joint_types,
+                self.n_points,
+                self.passive,
+                self.tips,
+                self.parents,
             )
         else:
             names = parameter_names(len(self.joint_types), self.beta_joints, self.n_points)
@@ -252,7 +282,7 @@ class _Graph(NamedTuple):
     cos: ca.SX  # cos and sin of the constant angles (`Chain.angle_index`)
     sin: ca.SX
     pext: ca.SX  # p, cos, sin, then cos and sin of the anchors: the parameter input
-    T: ca.SX  # the tool pose, 4 × 4
+    T: ca.SX  # the tool pose, 4 × 4; a tree's tips' poses stacked, (4 · tips) × 4
     qin: ca.SX  # q, jcos, jsin: the Functions' per-pose input
     jcos: ca.SX  # cos and sin of the revolute joints' angles (`Chain.joint_trig`)
     jsin: ca.SX
@@ -352,6 +382,11 @@ class Chain:
         base = frame("base")
         dof = len(structure.joint_types)
         q_eff = [q[i] for i in range(dof)]
+        if structure.tips:
+            if structure.terms or structure.n_points:
+                raise tree_refusal("error terms and measured points")
+            T = walk_tree(structure, base, q_eff, P, trig, joint_trig)
+            return _Graph(*symbols, T, *joints)
         if structure.terms:
             from .terms import STANDARD_GRAVITY, joint_deltas
 
@@ -431,7 +466,11 @@ class Chain:
 
         CasADi stores matrices column-major, so each output is the transpose of what the
         caller sees: ``T.T`` gives a row-major 4 × 4, ``J.T`` (k × 3) a row-major 3 × k.
+        A tree's graph holds its tips' poses stacked, (4 · tips) × 4: ``T.T`` is then the
+        tips' row-major 4 × 4 one after the other (`output_shape`).
         """
+        if self.structure.tips:
+            return self._tree_expression(kind, columns)
         g = self.graph
         T = g.T
         position = T[:3, 3]
@@ -472,6 +511,36 @@ class Chain:
             omega = ca.horzcat(*rows) if rows else ca.SX(3, 0)
             return ca.vertcat(J, omega).T
         raise ValueError(f"unknown kind {kind!r}; expected one of {KINDS}")
+
+    def _tree_expression(self, kind: str, columns: tuple[int, ...]) -> ca.SX:
+        """`expression` of a tree: per tip what a serial chain gives of its tool, stacked
+        tip after tip (the tips' positions are its measured points)."""
+        g = self.graph
+        tips = [g.T[4 * k : 4 * k + 4, :] for k in range(len(self.structure.tips))]
+        positions = ca.vertcat(*(T[:3, 3] for T in tips))
+        if kind == "fk":
+            return g.T.T
+        if kind in ("position", "points"):
+            return positions
+        if kind == "joint_jacobian":
+            raise tree_refusal("joint Jacobians (compensation)")
+        if kind not in PARAMETER_JACOBIANS:
+            raise ValueError(f"unknown kind {kind!r}; expected one of {KINDS}")
+        J = self._jacobian(positions, columns)
+        if kind == "points_and_jacobian":
+            return ca.horzcat(J, positions).T
+        if kind in ("position_jacobian", "points_jacobian"):
+            return J.T
+        # pose_jacobian: per tip its 3 position rows, then its 3 rotation rows
+        rows = []
+        for k, T in enumerate(tips):
+            dR = self._jacobian(ca.vec(T[:3, :3]), columns)
+            omega = []
+            for c in range(len(columns)):
+                W = ca.reshape(dR[:, c], 3, 3) @ T[:3, :3].T
+                omega.append(ca.vertcat(W[2, 1], W[0, 2], W[1, 0]))
+            rows += [J[3 * k : 3 * k + 3, :], ca.horzcat(*omega) if omega else ca.SX(3, 0)]
+        return ca.vertcat(*rows).T
 
     def function(self, kind: str, columns: tuple[int, ...] = ()) -> ca.Function:
         """A CasADi Function ``(q, p) -> out`` for one pose, dense output, CSE applied."""
@@ -561,7 +630,24 @@ class Chain:
         )
 
     def output_shape(self, kind: str, k: int) -> tuple[int, ...]:
-        """Per-pose output shape of `kind` with `k` parameter columns (C order)."""
+        """Per-pose output shape of `kind` with `k` parameter columns (C order).
+
+        A tree's: "fk" (tips, 4, 4), "position" (tips, 3), and its Jacobians' rows stacked
+        tip after tip: (3 · tips, k) for the positions and points, (6 · tips, k) for the
+        pose (each tip's 3 position rows, then its 3 rotation rows).
+        """
+        if self.structure.tips:
+            n = len(self.structure.tips)
+            return {
+                "fk": (n, 4, 4),
+                "position": (n, 3),
+                "position_jacobian": (3 * n, k),
+                "pose_jacobian": (6 * n, k),
+                "points": (3 * n,),
+                "points_jacobian": (3 * n, k),
+                "points_and_jacobian": (3 * n, k + 1),
+                "joint_jacobian": (6, len(self.structure.joint_types)),
+            }[kind]
         m3 = 3 * max(self.structure.n_points, 1)
         return {
             "fk": (4, 4),
@@ -573,6 +659,15 @@ class Chain:
             "points_and_jacobian": (m3, k + 1),
             "joint_jacobian": (6, len(self.structure.joint_types)),
         }[kind]
+
+
+def tree_refusal(what: str) -> CalibrationError:
+    """The error for what trees (several tips) do not support yet."""
+    return CalibrationError(
+        f"{what} are not supported on a kinematic tree (a robot with several tips) yet: "
+        "trees support is geometric for now (forward kinematics, simulate, identify, "
+        "save); use one chain (tip_link= one link) for this"
+    )
 
 
 @cache

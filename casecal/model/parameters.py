@@ -15,6 +15,11 @@ joint angle, ``{joint}.offset`` (rad). (A prismatic joint has none: a constant a
 axis is a shift of the origin, which x, y, z carry.) The set is redundant on purpose; the
 identifiability analysis reduces it to a base set.
 
+A tree read from a URDF (several measured tips, `casecal.model.tree`) has each tip's frame
+``{tip}.x`` … ``{tip}.yaw`` (its link's name) in place of the tool frame, first in the
+vector (`urdf_parameter_names` says why); a joint on the path to several tips is one set of
+parameters, shared.
+
 Lengths are in metres and angles in radians everywhere inside casecal.
 """
 
@@ -72,7 +77,12 @@ URDF_ORIGIN = ("x", "y", "z", "roll", "pitch", "yaw")
 
 
 def urdf_parameter_names(
-    joint_names: Sequence[str], joint_types: str, n_points: int = 0, passive=()
+    joint_names: Sequence[str],
+    joint_types: str,
+    n_points: int = 0,
+    passive=(),
+    tips=(),
+    parents=(),
 ) -> tuple[str, ...]:
     """Names of the full parameter vector of a URDF chain, in canonical order.
 
@@ -80,16 +90,45 @@ def urdf_parameter_names(
     joint, tuples whose first item is the mimic joint's name), then its own origin
     ``{joint}.x`` … ``{joint}.yaw`` and, when revolute, ``{joint}.offset``; then the base
     and tool frames and the points, as for DH.
+
+    A tree (`tips`: (name, joint it rides on) per tip, `parents`: per joint the joint it
+    hangs from; `casecal.model.tree`) has no tool frame and no points, and its order
+    serves its base set: `casecal.identification.analysis.pivot_order` offers the frames
+    it knows by name (base, points, tool) first and the rest in this order, estimating the
+    first parameter of each blind group and holding the others. So first come the tips'
+    frames ``{tip}.x`` … ``{tip}.yaw`` (m, rad), which, like the tool frame, absorb the
+    last joints' parameters exactly; then the joints by how many tips they carry (those of
+    one tip's branch first, then those shared by two, …; in joint order among equals),
+    because a joint that carries several branches, estimated in their place, would have
+    to be compensated in every other branch (a 1 mrad turn of an elbow's origin standing
+    for a turn of the torso hundreds of times as large); then the base frame.
     """
-    names: list[str] = []
     passive = passive or ((),) * len(joint_names)
+    per_joint = []
     for joint, kind, before in zip(joint_names, joint_types, passive, strict=True):
-        names += [f"{p[0]}.{c}" for p in before for c in URDF_ORIGIN]
+        names = [f"{p[0]}.{c}" for p in before for c in URDF_ORIGIN]
         names += [f"{joint}.{c}" for c in URDF_ORIGIN]
-        if kind == "R":
-            names.append(f"{joint}.offset")
+        per_joint.append(names + ([f"{joint}.offset"] if kind == "R" else []))
+    if tips:
+        if n_points:
+            raise ValueError("internal error: a tree has no measured points")
+        frames = [f"{name}.{c}" for name, _ in tips for c in URDF_ORIGIN]
+        joints = [n for i in tree_order(parents, tips) for n in per_joint[i]]
+        return (*frames, *joints, *frame_names("base"))
     points = [f"point{k}_{a}" for k in range(1, n_points + 1) for a in "xyz"]
+    names = [n for names in per_joint for n in names]
     return (*names, *frame_names("base"), *frame_names("tool"), *points)
+
+
+def tree_order(parents: Sequence[int], tips) -> list[int]:
+    """A tree's joints (0-based) in the order of its parameters: by how many of the `tips`
+    ((name, joint) pairs) each carries, in joint order among equals (`urdf_parameter_names`)."""
+    carried = [0] * len(parents)
+    for _, joint in tips:
+        while joint >= 0:
+            carried[joint] += 1
+            joint = parents[joint]
+    return sorted(range(len(parents)), key=lambda i: (carried[i], i))
 
 
 @dataclass(frozen=True)

@@ -104,6 +104,10 @@ class Robot:
         arrays may then carry them as extra columns after the joints (`with_inputs`).
     payload_com : (float, float, float)
         The payload's centre of mass in the tool frame, m (with a ``payload_kg`` input).
+    parents, tip_frames : tuple of int, tuple of casecal.model.tree.Tip
+        A kinematic tree (several measured tips, `casecal.model.tree`): per joint the index
+        of the joint it hangs from (-1: the base), and the tips with their frames, which
+        replace the tool frame. Both empty for a serial chain.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -126,11 +130,17 @@ class Robot:
     gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
     inputs: tuple = ()
     payload_com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    parents: tuple[int, ...] = ()
+    tip_frames: tuple = ()
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
         from .terms import check_terms, refreshed
 
+        if self.parents or self.tip_frames:
+            from .tree import check_tree
+
+            check_tree(self)  # first: what a tree does not support is said as such
         object.__setattr__(self, "terms", tuple(self.terms))
         check_terms(self)
         object.__setattr__(self, "terms", refreshed(self))
@@ -179,6 +189,20 @@ class Robot:
         return len(self.joints)
 
     @property
+    def tips(self) -> tuple[str, ...]:
+        """Names of the measured tips: a tree's tip links; for a serial chain one, its URDF
+        tip link (``"tool"`` for a DH robot, or a URDF robot from a robot file)."""
+        if self.tip_frames:
+            return tuple(t.name for t in self.tip_frames)
+        tip = getattr(self.urdf, "tip_link", None)
+        return (tip,) if isinstance(tip, str) else ("tool",)
+
+    @property
+    def is_tree(self) -> bool:
+        """Whether the robot is a kinematic tree (several tips, `casecal.model.tree`)."""
+        return bool(self.tip_frames)
+
+    @property
     def n_inputs(self) -> int:
         """Columns of a pose: the joints, then the per-pose `inputs`."""
         return self.dof + len(self.inputs)
@@ -205,6 +229,9 @@ class Robot:
         extra = {"terms": shapes, "gravity": tuple(self.gravity)} if self.terms else {}
         if self.inputs:
             extra["inputs"] = tuple(self.inputs)
+        if self.tip_frames:
+            extra["parents"] = self.parents
+            extra["tips"] = tuple((t.name, t.parent) for t in self.tip_frames)
         if self.convention == "urdf":
             return kinematics.Structure(
                 "urdf",
@@ -234,6 +261,8 @@ class Robot:
 
     def vector(self) -> np.ndarray:
         """The full parameter vector, shape (n_params,), in the order of `parameter_names`."""
+        if self.tip_frames:
+            return self._tree_vector()
         values: list[float] = []
         for j in self.joints:
             if self.convention == "urdf":
@@ -247,6 +276,19 @@ class Robot:
         values += [v for p in self.points for v in p]
         values += [v for t in self.terms for v in t.values]
         return np.array(values, dtype=float)
+
+    def _tree_vector(self) -> np.ndarray:
+        """`vector` of a tree: its tips' frames, the joints in the order of
+        `casecal.model.parameters.tree_order`, the base frame."""
+        from .parameters import tree_order
+
+        tips = tuple((t.name, t.parent) for t in self.tip_frames)
+        values: list[float] = [v for t in self.tip_frames for v in (*t.xyz, *t.rpy)]
+        for i in tree_order(self.parents, tips):
+            j = self.joints[i]
+            values += [v for p in j.passive for v in (*p.xyz, *p.rpy)]
+            values += [*j.xyz, *j.rpy] + ([j.offset] if j.type == "R" else [])
+        return np.array([*values, *self.base.xyz, *self.base.rpy], dtype=float)
 
     @property
     def limits(self) -> np.ndarray:
@@ -276,9 +318,11 @@ class Robot:
 
         The sum of every link's |a| and |d|, a prismatic joint's largest travel, and the
         tool and reflector offsets: no pose of the arm puts a point farther out. None for
-        a prismatic joint without limits.
+        a prismatic joint without limits. A tree's: every joint's (a bound for each
+        branch) and its farthest tip's offset.
         """
         total = float(np.linalg.norm(self.tool.xyz))
+        total += max((float(np.linalg.norm(t.xyz)) for t in self.tip_frames), default=0.0)
         total += max((float(np.linalg.norm(p)) for p in self.points), default=0.0)
         for j in self.joints:
             total += (
@@ -320,13 +364,22 @@ class Robot:
         terms = tuple(
             dataclasses.replace(t, values=tuple(p[n] for n in t.parameters)) for t in self.terms
         )
+        tips = tuple(
+            dataclasses.replace(
+                t,
+                xyz=tuple(p[f"{t.name}.{c}"] for c in "xyz"),
+                rpy=tuple(p[f"{t.name}.{c}"] for c in ("roll", "pitch", "yaw")),
+            )
+            for t in self.tip_frames
+        )
         return dataclasses.replace(
             self,
             joints=joints_from(self, p),
             base=frame("base"),
-            tool=frame("tool"),
+            tool=self.tool if tips else frame("tool"),
             points=points,
             terms=terms,
+            tip_frames=tips,
             auto_beta=False,
         )
 
@@ -342,6 +395,8 @@ class Robot:
 
     def with_terms(self, *terms) -> Robot:
         """A new Robot with the error terms `terms` (`casecal.model.terms.ErrorTerm`) added."""
+        if terms and self.tip_frames:
+            raise kinematics.tree_refusal("error terms")
         return dataclasses.replace(self, terms=(*self.terms, *terms), auto_beta=False)
 
     def with_compliance(self, joints=None) -> Robot:
@@ -349,12 +404,16 @@ class Robot:
         carries gravity load) deflect by ``c{i}·τ_i`` under gravity (`inertials` needed)."""
         from .terms import compliance_terms
 
+        if self.tip_frames:
+            raise kinematics.tree_refusal("compliance terms")
         return self.with_terms(*compliance_terms(self, joints))
 
     def with_joint_harmonics(self, joint: int, order: int) -> Robot:
         """A new Robot with ``h{joint}_s{k}``, ``h{joint}_c{k}`` (k ≤ `order`) on a joint."""
         from .terms import harmonics
 
+        if self.tip_frames:
+            raise kinematics.tree_refusal("joint harmonics")
         return self.with_terms(harmonics(joint, order))
 
     def with_deviations(self, deviations: Mapping[str, float]) -> Robot:
@@ -403,7 +462,7 @@ class Robot:
     # --- kinematics -------------------------------------------------------------------
 
     def fk(self, q) -> np.ndarray:
-        """End-effector pose (tool frame in world).
+        """End-effector pose (tool frame in world); a tree's tips' frames.
 
         Parameters
         ----------
@@ -412,13 +471,14 @@ class Robot:
 
         Returns
         -------
-        ndarray, shape (4, 4) or (N, 4, 4)
+        ndarray, shape (4, 4) or (N, 4, 4); a tree: (tips, 4, 4) or (N, tips, 4, 4)
             Homogeneous transforms, translation in m.
         """
         return self._evaluate("fk", q)
 
     def position(self, q) -> np.ndarray:
-        """Tool-point position, m: shape (3,) for q (dof,), (N, 3) for q (N, dof)."""
+        """Tool-point position, m: shape (3,) for q (dof,), (N, 3) for q (N, dof); a tree's
+        tips' positions, (tips, 3) or (N, tips, 3), in the order of `tips`."""
         return self._evaluate("position", q)
 
     def measured_points(self, q) -> np.ndarray:
@@ -454,7 +514,8 @@ class Robot:
         Returns
         -------
         J : ndarray, shape (3, k) or (N, 3, k)
-            ∂position/∂p; m/m for lengths, m/rad for angles.
+            ∂position/∂p; m/m for lengths, m/rad for angles. A tree's tips' rows one tip
+            after the other: (3 · tips, k) or (N, 3 · tips, k).
         names : list of str
             The k parameter names, in column order.
         """
@@ -473,7 +534,8 @@ class Robot:
         Returns
         -------
         J : ndarray, shape (6, k) or (N, 6, k)
-            Rows 0-2 in m per unit parameter, rows 3-5 in rad per unit parameter.
+            Rows 0-2 in m per unit parameter, rows 3-5 in rad per unit parameter. A tree's
+            six rows per tip one tip after the other: (6 · tips, k) or (N, 6 · tips, k).
         names : list of str
         """
         names = select(self.parameter_names, parameters)

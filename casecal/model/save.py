@@ -38,6 +38,11 @@ def export(robot, path) -> Export:
         text, notes = robot_to_toml(robot), []
         contract = Contract("a TOML robot file", robot, robot, read)
     elif suffix in (".urdf", ".yaml", ".yml"):
+        if suffix != ".urdf" and robot.is_tree:
+            raise CalibrationError(
+                f"{path}: a UR kinematics file holds one arm, and robot {robot.name!r} is a "
+                "tree with several tips; save it as .urdf or .toml"
+            )
         if suffix == ".urdf":
             from .urdf_out import robot_to_urdf as writer
             from .urdf_out import urdf_contract as contract_of

@@ -21,13 +21,19 @@ def robot_to_toml(robot: Robot) -> str:
         chain = robot.calibrated_chain or (
             (robot.urdf.base_link, robot.urdf.tip_link) if robot.urdf is not None else ()
         )
+        if chain and not isinstance(chain[1], str):  # a tree's tips
+            chain = (chain[0], *chain[1])
         if chain:
-            lines.append(f"calibrated_chain = [{_q(chain[0])}, {_q(chain[1])}]")
+            lines.append(f"calibrated_chain = [{', '.join(_q(c) for c in chain)}]")
     for i, j in enumerate(robot.joints):
         if robot.convention == "urdf":
             from .urdf_toml import joint_to_lines
 
             lines += ["", "[[joints]]", *joint_to_lines(j, _q), *inertial_lines(robot, i)]
+            if robot.is_tree:
+                from .tree import toml_lines
+
+                lines += toml_lines(robot, i)
             continue
         lines += [
             "",
@@ -46,7 +52,12 @@ def robot_to_toml(robot: Robot) -> str:
     if robot.points:
         rows = ", ".join("[" + ", ".join(repr(float(v)) for v in p) + "]" for p in robot.points)
         lines.insert(lines.index('angle_unit = "rad"') + 1, f"points = [{rows}]")
-    for key, frame in (("base", robot.base), ("tool", robot.tool)):
+    if robot.is_tree:
+        from .tree import toml_tip_lines
+
+        lines += toml_tip_lines(robot, _q)
+    frames = (("base", robot.base), ("tool", robot.tool))
+    for key, frame in frames[:1] if robot.is_tree else frames:  # a tree's tips: its tools
         lines += [
             "",
             f"[{key}]",

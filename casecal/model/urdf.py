@@ -109,11 +109,12 @@ def split(T: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
 
 @dataclass(frozen=True)
 class UrdfSource:
-    """The URDF text a robot was read from, and the chain's ends in it."""
+    """The URDF text a robot was read from, and the chain's ends in it (a tree's tips: a
+    tuple of links)."""
 
     text: str
     base_link: str
-    tip_link: str
+    tip_link: str | tuple[str, ...]
 
     def __repr__(self) -> str:
         return f"UrdfSource({self.base_link!r} to {self.tip_link!r}, {len(self.text)} characters)"
@@ -247,16 +248,25 @@ def parse(text: str, label: str) -> tuple[ET.Element, list[_Joint]]:
     return root, joints
 
 
-def read_urdf(
-    text: str, label: str = "URDF", base_link: str | None = None, tip_link: str | None = None
-):
+def read_urdf(text: str, label: str = "URDF", base_link: str | None = None, tip_link=None):
     """The `Robot` of the chain from `base_link` to `tip_link` in URDF `text`.
 
     Defaults: the root link, and the end of the one chain with the most movable joints
     (``tool0`` among equals). Fixed joints fold into the next movable joint's origin, those
     after the last into the tool frame.
+
+    `tip_link` a list or tuple of links: with one, the chain to it; with several, the tree
+    of the paths to them (`casecal.model.tree`), each a measured tip.
     """
     from .robot import Frame, Robot
+
+    if isinstance(tip_link, list | tuple):
+        from .tree import read_tree, tip_links
+
+        tips = tip_links(tip_link, label)
+        if len(tips) > 1:
+            return read_tree(text, label, base_link, tips)
+        tip_link = tips[0]
 
     root, joints = parse(text, label)
     links = [el.get("name") for el in root.findall("link")]
@@ -357,10 +367,12 @@ def _combined(parts) -> tuple[float, tuple[float, float, float]] | None:
 def load_urdf(
     path: Path,
     base_link: str | None = None,
-    tip_link: str | None = None,
+    tip_link=None,
     packages: dict[str, str] | None = None,
 ):
     """Read a ``.urdf`` file, or expand a ``.xacro`` one (the ``urdf`` extra).
+
+    `tip_link`: a link, or a list of links (`read_urdf`).
 
     `packages` maps ROS package names to folders for ``$(find pkg)`` and
     ``package://`` in a xacro file; folders above the file are found by themselves.

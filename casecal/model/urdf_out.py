@@ -240,7 +240,12 @@ def new_urdf(robot) -> tuple[str, list[str]]:
 
 
 def robot_to_urdf(robot) -> tuple[str, list[str]]:
-    """URDF text of `robot` and notes on what it cannot hold (see the module doc)."""
+    """URDF text of `robot` and notes on what it cannot hold (see the module doc); a tree
+    (several tips) into its own URDF text (`casecal.model.tree.tree_urdf`)."""
+    if robot.is_tree:
+        from .tree import tree_urdf
+
+        return tree_urdf(robot)
     if robot.urdf is not None:
         return calibrated_urdf(robot)
     return new_urdf(robot)
@@ -260,6 +265,10 @@ def urdf_contract(robot, label: str):
     from .robot import Frame
     from .urdf import read_urdf
 
+    if robot.is_tree:
+        from .tree import tree_contract
+
+        return tree_contract(robot, label)
     if robot.urdf is None:
         reference, held = robot, dataclasses.replace(robot, terms=(), auto_beta=False)
         ends, reason = (None, "tool0"), ""
