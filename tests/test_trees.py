@@ -293,6 +293,18 @@ def test_a_humanoid_identifies_to_the_noise_floor(fitted):
     assert err.mean() < 0.25 * 0.5e-3 * np.sqrt(3)  # far below one measurement's noise
 
 
+def test_a_tree_validates_on_new_poses_and_designs_its_poses(fitted):
+    robot, true, _, cal, _ = fitted
+    held_out = cc.simulate(true, cc.poses.uniform(robot, 120, seed=31), noise=0.5e-3, seed=32)
+    check = cc.validate(cal.robot, held_out, robot)  # the tips' markers refitted as frames
+    assert check.after.rms < 0.2 * check.before.rms
+    assert check.after.rms < 1.2 * 0.5e-3 * np.sqrt(3)  # the noise, and little more
+    q = cc.poses.optimal(robot, 40, parameters="all", n_candidates=300)
+    assert q.shape == (40, 17)
+    # 40 chosen poses see what 300 random ones see: every tip's rows count
+    assert cc.observability(robot, q, "all").rank == cal.observability.rank
+
+
 def test_a_tree_calibrated_goes_back_into_its_urdf(fitted, tmp_path):
     robot, _, _, cal, _ = fitted
     notes = cc.save_robot(cal.robot, tmp_path / "calibrated.urdf")
@@ -433,3 +445,51 @@ def test_what_trees_do_not_support_yet_is_refused(urdf_path, tmp_path):
         cc.CalibrationError, match="no movable joint between 'pelvis' and tip 'pelvis'"
     ):
         cc.load_robot(urdf_path, tip_link=["pelvis", "left_marker"])
+
+
+def long_arms(seed: int = 0, per_arm: int = 14) -> str:
+    """A 30-joint tree: a trunk of 2 joints and two arms of `per_arm` joints, each with a
+    marker link; origins turned as in `humanoid`."""
+    rng = np.random.default_rng(seed)
+    links, joints = ["base"], []
+
+    def add(name, kind, parent, child, axis):
+        links.append(child)
+        xyz = [*rng.uniform(-0.04, 0.04, 2).tolist(), 0.06]
+        size = rng.uniform(0.3, 0.8, 3) * rng.choice([-1.0, 1.0], 3)
+        rpy = np.where(rng.random(3) < 0.4, 0.0, size)
+        joints.append(_joint(name, kind, parent, child, xyz, rpy.tolist(), axis))
+
+    axes = ("0 0 1", "0 1 0", "1 0 0")
+    add("trunk_1", "revolute", "base", "k1", axes[0])
+    add("trunk_2", "revolute", "k1", "k2", axes[1])
+    for side in ("a", "b"):
+        parent = "k2"
+        for k in range(1, per_arm + 1):
+            add(f"{side}{k}", "revolute", parent, f"{side}_l{k}", axes[(k + 1) % 3])
+            parent = f"{side}_l{k}"
+        add(f"{side}_marker_joint", "fixed", parent, f"{side}_marker", "1 0 0")
+    body = "\n".join(f'  <link name="{name}"/>' for name in links)
+    return f'<robot name="long_arms">\n{body}\n' + "\n".join(joints) + "\n</robot>\n"
+
+
+@pytest.mark.slow
+def test_a_30_joint_tree_at_10000_poses_identifies_in_seconds(tmp_path):
+    path = tmp_path / "long.urdf"
+    path.write_text(long_arms())
+    robot = cc.load_robot(path, tip_link=["a_marker", "b_marker"])
+    assert robot.dof == 30
+    true, meas = _session(robot, 10_000, seed=4)
+    cc.identify(robot, meas.take(np.arange(300)), "all")  # compiles the kernels, if new
+    start = time.perf_counter()
+    cal = cc.identify(robot, meas, "all")
+    seconds = time.perf_counter() - start
+    q = cc.poses.uniform(robot, 500, seed=5)
+    err = np.linalg.norm(cal.robot.position(q) - true.position(q), axis=-1)
+    print(
+        f"\n30 joints, 2 tips, 10,000 poses: {seconds:.1f} s, {len(cal.estimated)} of "
+        f"{len(cal.parameters)} estimated; held-out mean {err.mean() * 1e3:.4f} mm"
+    )
+    assert cal.success, cal.message
+    assert err.mean() < 0.05e-3
+    assert seconds < 30

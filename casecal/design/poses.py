@@ -147,9 +147,9 @@ def optimal(
     J = J[:, :, [names.index(b) for b in base]]
     scale = np.linalg.norm(J.reshape(-1, len(base)), axis=0)
     J = J / scale  # (C, 3, k) scaled
-    k = len(base)
-    if 3 * (n + (0 if include is None else len(include))) < k:
-        raise CalibrationError(f"{n} poses give {3 * n} coordinates for {k} parameters")
+    k, rows = len(base), J.shape[1]  # rows: 3 per pose, per tip of a tree
+    if rows * (n + (0 if include is None else len(include))) < k:
+        raise CalibrationError(f"{n} poses give {rows * n} coordinates for {k} parameters")
     M0 = None
     if include is not None and len(include):
         Ji, _ = robot.position_jacobian(np.asarray(include, float), names, deviations=True)
@@ -161,9 +161,10 @@ def optimal(
 
 
 def _score(J: np.ndarray, Minv: np.ndarray, M: np.ndarray, criterion: str) -> np.ndarray:
-    """Criterion gain of adding each candidate's rows J (C, 3, k) to M."""
+    """Criterion gain of adding each candidate's rows J (C, 3, k) to M (a tree's: 3 per
+    tip)."""
     if criterion == "O1":
-        A = (J @ Minv) @ np.swapaxes(J, 1, 2) + np.eye(3)  # (C, 3, 3), batched matmul
+        A = (J @ Minv) @ np.swapaxes(J, 1, 2) + np.eye(J.shape[1])  # (C, 3, 3), batched
         return np.linalg.slogdet(A)[1]
     # O3: first-order gain along the weakest direction, then exact on the best few
     w, V = np.linalg.eigh(M)
@@ -195,9 +196,9 @@ def _greedy(J: np.ndarray, n: int, criterion: str, M0=None) -> list[int]:
 
 
 def _woodbury(Minv: np.ndarray, Jc: np.ndarray, sign: float) -> np.ndarray:
-    """(M ± Jcᵀ Jc)⁻¹ from M⁻¹ by the Woodbury identity (rank 3)."""
+    """(M ± Jcᵀ Jc)⁻¹ from M⁻¹ by the Woodbury identity (rank 3, or 3 per tip)."""
     U = Minv @ Jc.T  # (k, 3)
-    S = np.eye(3) * sign + Jc @ U
+    S = np.eye(len(Jc)) * sign + Jc @ U
     return Minv - U @ np.linalg.solve(S, U.T)
 
 
