@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
+from casecal.design.campaign import predicted_error
 from casecal.model.kinematics import Structure, chain, is_constant_angle
 from casecal.model.rotation_chart import is_anchored
 
@@ -290,6 +291,8 @@ def test_a_humanoid_identifies_to_the_noise_floor(fitted):
     )
     assert err.mean() < 0.3 * before.mean()
     assert 0.7 * predicted < rms < 1.4 * predicted  # at the noise floor, no bias
+    # the campaign's prediction of the 95 % error, over both tips at every pose
+    assert 0.5 < predicted_error(cal, q) / np.quantile(err, 0.95) < 2
     assert err.mean() < 0.25 * 0.5e-3 * np.sqrt(3)  # far below one measurement's noise
 
 

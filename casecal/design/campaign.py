@@ -76,7 +76,8 @@ _Z = np.random.default_rng(20261122).normal(size=(4000, 3))  # fixed: prediction
 
 
 def predicted_error(cal: Calibration, q_holdout: np.ndarray, level: float = 0.95) -> float:
-    """The `level` percentile over `q_holdout` of each pose's `level` error radius, m.
+    """The `level` percentile over `q_holdout` of each pose's `level` error radius, m (a
+    tree's: of each tip's at each pose).
 
     A pose's error is Gaussian with covariance ``J C Jᵀ`` (anisotropic in general); its
     radius quantile is taken from 4,000 fixed standard-normal samples through the
@@ -84,6 +85,7 @@ def predicted_error(cal: Calibration, q_holdout: np.ndarray, level: float = 0.95
     that does not fit its data cannot promise a small error.
     """
     J, _ = cal.robot.position_jacobian(q_holdout, list(cal.estimated), deviations=True)
+    J = J.reshape(-1, 3, J.shape[-1])  # a tree's rows per tip: each tip's error its own
     cov = np.einsum("nik,kl,njl->nij", J, cal.covariance, J)  # (N, 3, 3)
     lam = np.clip(np.linalg.eigvalsh(cov), 0.0, None)  # (N, 3)
     radius = np.quantile(np.sqrt((_Z**2) @ lam.T), level, axis=0)  # (N,)
