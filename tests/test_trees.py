@@ -4,6 +4,7 @@ differences, one identification of every tip, and the files in and out."""
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import time
 
@@ -11,7 +12,9 @@ import numpy as np
 import pytest
 
 import casecal as cc
+from casecal.cli import main
 from casecal.design.campaign import predicted_error
+from casecal.model.catalog import nominal_of
 from casecal.model.kinematics import Structure, chain, is_constant_angle
 from casecal.model.rotation_chart import is_anchored
 
@@ -335,11 +338,19 @@ def test_a_tree_calibrated_goes_back_into_its_urdf(fitted, tmp_path):
     movable = {j.name for j in robot.joints} | {"left_m"}
     assert markers <= changed <= markers | movable
     assert sum(a != b for a, b in zip(before, after, strict=True)) == len(changed)
-    # a robot file holds all of it, the base frame too
-    assert cc.save_robot(cal.robot, tmp_path / "calibrated.toml") == []
+    # a robot file holds all of it, the base frame too, and where it came from
+    named = dataclasses.replace(cal.robot, calibrated_from=str(robot.source[0]), auto_beta=False)
+    assert cc.save_robot(named, tmp_path / "calibrated.toml") == []
     again = cc.load_robot(tmp_path / "calibrated.toml")
     assert again.tips == robot.tips and again.parents == robot.parents
     assert np.abs(again.fk(q) - cal.robot.fk(q)).max() < 1e-12
+    assert again.calibrated_chain == ("pelvis", *TIPS) and nominal_of(again) == robot
+    # the command line does not take trees yet, and says so
+    assert main(["show", str(tmp_path / "calibrated.toml")]) == 2
+    text = (tmp_path / "calibrated.toml").read_text()
+    (tmp_path / "orphan.toml").write_text(text.replace("parent = 3\n", "", 1))
+    with pytest.raises(cc.CalibrationError, match=r"joints\[4\] of a tree .* needs parent"):
+        cc.load_robot(tmp_path / "orphan.toml")
 
 
 def test_a_tip_frame_with_no_fixed_joint_to_hold_it_is_said(tmp_path, urdf_path):
