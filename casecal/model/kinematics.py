@@ -144,11 +144,6 @@ class Structure:
         return f"Structure({', '.join(shown)})"
 
     @property
-    def n_tips(self) -> int:
-        """Measured tips: those of a tree, 1 for a serial chain."""
-        return max(len(self.tips), 1)
-
-    @property
     def n_inputs(self) -> int:
         """Per-pose inputs of the graph: the joint values, then the `inputs` (covariates)."""
         return len(self.joint_types) + len(self.inputs)
