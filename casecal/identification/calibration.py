@@ -123,6 +123,12 @@ class Calibration:
     measured : {"points", "distances"}
         What the residuals are: measured points (N·m rows of x, y, z) or distances between
         pairs of poses (one row each).
+    sessions : dict of str to SessionFit
+        For measurements of several sessions (`Measurements.session`): each session's
+        fitted frames with their standard errors, by label in order of appearance
+        (`casecal.identification.sessions.SessionFit`). `robot` has the first session's
+        frames; `nominal` has a frame per session, all at the nominal ones. Empty for one
+        session.
     """
 
     method: str
@@ -159,6 +165,7 @@ class Calibration:
     pose_blind: tuple[str, ...] = ()
     still_joints: tuple[str, ...] = ()
     measured: str = "points"
+    sessions: dict = field(default_factory=dict)
 
     @property
     def success(self) -> bool:
