@@ -348,18 +348,22 @@ class Calibration:
 
 @dataclass(frozen=True)
 class Summary:
-    """Text report of a `Calibration`; ``str(summary)`` gives it, `to_frame` the table."""
+    """Text report of a `Calibration`; ``str(summary)`` gives it, `to_frame` the table;
+    `sessions` the fitted frames of measurements of several sessions ("" for one)."""
 
     header: str
     table: pd.DataFrame
     diagnostics: str
     notes: tuple[str, ...]
+    sessions: str = ""
 
     def as_text(self) -> str:
         """The whole report as plain text."""
         from .summary import format_table
 
         parts = [self.header, format_table(self.table), self.diagnostics]
+        if self.sessions:
+            parts.insert(2, self.sessions)
         if self.notes:
             parts.append("Notes:\n" + "\n".join(f"[{i}] {n}" for i, n in enumerate(self.notes, 1)))
         return "\n\n".join(parts)

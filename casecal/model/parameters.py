@@ -72,9 +72,11 @@ def check_session_label(label, where: str = "") -> str:
     Letters (any script), digits, ``_`` and ``-``: a space, ``@``, ``.``, ``,`` or a
     wildcard would make names that `select` and the name rules misread.
     """
-    text = label if isinstance(label, str) else None
-    if text is None or not _LABEL_RE.match(text):
-        at = f" ({where})" if where else ""
+    at = f" ({where})" if where else ""
+    if not isinstance(label, str):
+        raise CalibrationError(f"session label {label!r}{at} is not text: give labels as str")
+    text = label
+    if not _LABEL_RE.match(text):
         raise CalibrationError(
             f"session label {label!r}{at} cannot name parameters (base_x@LABEL): use "
             "letters, digits, '_' or '-' only, e.g. 'day1' or '2024-05-03'"
