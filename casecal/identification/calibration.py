@@ -266,6 +266,18 @@ class Calibration:
         )
         return rows - len(self.estimated)
 
+    def session_robot(self, label: str) -> Robot:
+        """The calibrated robot as session `label` saw it: with that session's fitted base
+        (and tool) frame, to predict its measurements in its instrument's frame."""
+        if label not in self.sessions:
+            from ..errors import CalibrationError
+
+            known = ", ".join(self.sessions) or "none: the data had one session"
+            raise CalibrationError(f"no session {label!r} in this calibration (sessions: {known})")
+        fit = self.sessions[label]
+        tool = self.robot.tool if fit.tool is None else fit.tool
+        return dataclasses.replace(self.robot, base=fit.base, tool=tool, auto_beta=False)
+
     def compare_to(self, truth: dict) -> Calibration:
         """The same result with the true deviations (SI) known: `table` gains error columns."""
         unknown = [n for n in truth if n not in self.nominal.parameters]
