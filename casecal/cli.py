@@ -117,6 +117,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
                 ("--truth", args.truth),
                 ("--noise", args.noise),
                 ("--method ipopt", args.method == "ipopt"),
+                ("--per-session", args.per_session),
             )
             if value
         ]
@@ -147,6 +148,8 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         orientation_sigma=rot,
         progress=_progress_line(meas.n_poses),
     )
+    if args.per_session:
+        options["per_session"] = tuple(args.per_session.split(","))
     cal = identify(robot, meas, args.parameters, args.method, **options)
     if meas.n_poses >= PROGRESS_POSES and sys.stderr.isatty():
         print(file=sys.stderr)  # end the progress line
@@ -652,7 +655,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "measurements",
         metavar="CSV",
-        help="one row per pose: q1..qn (or q1_deg, q3_mm), x, y, z (or x_mm...)",
+        help="one row per pose: q1..qn (or q1_deg, q3_mm), x, y, z (or x_mm...); an "
+        "optional session column labels the instrument's placements, each fitted with its "
+        "own base frame",
     )
     p.add_argument(
         "--method",
@@ -710,6 +715,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="CSV",
         help="relative measurements: CSV of i, j, distance_mm (0-based rows of the measurement "
         "file, whose positions are then not needed)",
+    )
+    p.add_argument(
+        "--per-session",
+        choices=("base", "base,tool"),
+        default=None,
+        help="with a session column: the frames each session has of its own (default base; "
+        "base,tool when the probe was re-mounted too)",
     )
     p.add_argument(
         "--strict",

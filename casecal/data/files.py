@@ -13,7 +13,10 @@ One row per pose. Columns (any order; extra columns are kept out of the way and 
 - optional tool orientation as a unit quaternion ``qw, qx, qy, qz`` (tool frame in the
   measurement frame);
 - optional noise σ: ``sigma`` (m) or ``sigma_mm``, one isotropic value per row, or per
-  axis ``sigma_x_mm`` … ``sigma_z_mm``.
+  axis ``sigma_x_mm`` … ``sigma_z_mm``;
+- optional ``session``: a label per row naming the measurement session (the instrument
+  re-mounted between sessions; `casecal.identify` fits a base frame per session), any
+  text of letters, digits, ``_`` and ``-`` (read as text: ``1`` and ``01`` differ).
 
 Every mistake raises `CalibrationError` naming the file, the row or column, and the fix.
 """
@@ -29,6 +32,7 @@ import pandas as pd
 
 from ..errors import CalibrationError, CalibrationWarning
 from ..model.frames import matrix_from_quaternion, quaternion_from_matrix
+from ..model.parameters import check_session_label
 from ..model.robot import Robot
 from ..textio import read_text, write_atomic, write_together  # noqa: F401 (re-export)
 from .measurements import Measurements
@@ -73,14 +77,18 @@ def _read_csv(path, robot: Robot) -> Measurements:
         q = np.column_stack([q, _inputs(df, robot, label)])
     if robot.is_tree:
         y, named = _tip_positions(df, robot, label)
-        if not any(re.search(r"_(mm|m|um)$", c) for c in named):
-            _check_metres(y, robot, label)
+        in_metres = not any(re.search(r"_(mm|m|um)$", c) for c in named)
     else:
         y = _positions(df, columns, label)
-        if not any(re.fullmatch(r"(p\d+_)?[xyz]_(mm|m|um)", c) for c in columns):
-            _check_metres(y, robot, label)
+        in_metres = not any(re.fullmatch(r"(p\d+_)?[xyz]_(mm|m|um)", c) for c in columns)
         named = None
-    _check_units(df, robot, q, y, label, named)
+    session = _session(df, label)
+    # each session in its own instrument frame: the unit checks look at one at a time
+    groups = [slice(None)] if session is None else [session == s for s in dict.fromkeys(session)]
+    for rows in groups:
+        if in_metres:
+            _check_metres(y[rows], robot, label)
+        _check_units(df, robot, q[rows], y[rows], label, named)
     orientations = _orientations(df, columns, label)
     sigma = np.zeros((len(df), 3))
     if any(c in df for c in ("sigma", "sigma_m", "sigma_mm", "sigma_um")):
@@ -93,7 +101,25 @@ def _read_csv(path, robot: Robot) -> Measurements:
     if np.any(sigma < 0):
         row = int(np.argwhere(sigma < 0)[0][0])
         raise CalibrationError(f"{label}: row {row + 2}: sigma is negative; it must be >= 0")
-    return Measurements(q=q, positions=y, sigma=sigma, orientations=orientations)
+    return Measurements(q=q, positions=y, sigma=sigma, orientations=orientations, session=session)
+
+
+def _session(df: pd.DataFrame, label: str) -> np.ndarray | None:
+    """The ``session`` column's labels (surrounding spaces dropped), or None without one;
+    a blank cell or a label that cannot name parameters is refused with its row."""
+    if "session" not in df:
+        return None
+    values = df["session"].astype(str).str.strip().to_numpy(dtype=str)
+    blank = np.flatnonzero(values == "")
+    if blank.size:
+        raise CalibrationError(
+            f"{label}: row {blank[0] + 2}, column 'session' is blank; give every row its "
+            "session's label, or remove the column if all rows are of one session"
+        )
+    labels, first = np.unique(values, return_index=True)
+    for text, row in sorted(zip(labels.tolist(), first.tolist(), strict=True), key=lambda t: t[1]):
+        check_session_label(text, f"{label}: row {row + 2}, column 'session'")
+    return values
 
 
 def _inputs(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
@@ -361,6 +387,8 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
         else:
             for k, axis in enumerate("xyz"):
                 data[f"sigma_{axis}_mm"] = sigma[:, k] * 1e3
+    if measurements.session is not None:
+        data = {"session": measurements.session, **data}
     text = pd.DataFrame(data).to_csv(index=False, float_format="%.17g", lineterminator="\n")
     write_atomic(path, text)
 

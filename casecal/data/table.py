@@ -17,6 +17,9 @@ import pandas as pd
 from ..errors import CalibrationError
 from ..textio import read_bytes
 
+TEXT_COLUMNS = ("session",)
+"""Columns read as text whatever they hold: labels, where ``1`` and ``1.0`` differ."""
+
 CHUNK_ROWS = 20_000
 """Rows parsed at a time: each chunk's columns become numbers before the next is read."""
 
@@ -117,6 +120,7 @@ def _chunks(data: bytes, sep: str, label: str) -> list[pd.DataFrame]:
                 skipinitialspace=True,
                 index_col=False,
                 chunksize=CHUNK_ROWS,
+                dtype=dict.fromkeys(TEXT_COLUMNS, str),
             )
             with reader:
                 return list(reader)

@@ -123,6 +123,12 @@ class Calibration:
     measured : {"points", "distances"}
         What the residuals are: measured points (N·m rows of x, y, z) or distances between
         pairs of poses (one row each).
+    sessions : dict of str to SessionFit
+        For measurements of several sessions (`Measurements.session`): each session's
+        fitted frames with their standard errors, by label in order of appearance
+        (`casecal.identification.sessions.SessionFit`). `robot` has the first session's
+        frames; `nominal` has a frame per session, all at the nominal ones. Empty for one
+        session.
     """
 
     method: str
@@ -159,6 +165,7 @@ class Calibration:
     pose_blind: tuple[str, ...] = ()
     still_joints: tuple[str, ...] = ()
     measured: str = "points"
+    sessions: dict = field(default_factory=dict)
 
     @property
     def success(self) -> bool:
@@ -259,6 +266,18 @@ class Calibration:
         )
         return rows - len(self.estimated)
 
+    def session_robot(self, label: str) -> Robot:
+        """The calibrated robot as session `label` saw it: with that session's fitted base
+        (and tool) frame, to predict its measurements in its instrument's frame."""
+        if label not in self.sessions:
+            from ..errors import CalibrationError
+
+            known = ", ".join(self.sessions) or "none: the data had one session"
+            raise CalibrationError(f"no session {label!r} in this calibration (sessions: {known})")
+        fit = self.sessions[label]
+        tool = self.robot.tool if fit.tool is None else fit.tool
+        return dataclasses.replace(self.robot, base=fit.base, tool=tool, auto_beta=False)
+
     def compare_to(self, truth: dict) -> Calibration:
         """The same result with the true deviations (SI) known: `table` gains error columns."""
         unknown = [n for n in truth if n not in self.nominal.parameters]
@@ -341,18 +360,22 @@ class Calibration:
 
 @dataclass(frozen=True)
 class Summary:
-    """Text report of a `Calibration`; ``str(summary)`` gives it, `to_frame` the table."""
+    """Text report of a `Calibration`; ``str(summary)`` gives it, `to_frame` the table;
+    `sessions` the fitted frames of measurements of several sessions ("" for one)."""
 
     header: str
     table: pd.DataFrame
     diagnostics: str
     notes: tuple[str, ...]
+    sessions: str = ""
 
     def as_text(self) -> str:
         """The whole report as plain text."""
         from .summary import format_table
 
         parts = [self.header, format_table(self.table), self.diagnostics]
+        if self.sessions:
+            parts.insert(2, self.sessions)
         if self.notes:
             parts.append("Notes:\n" + "\n".join(f"[{i}] {n}" for i, n in enumerate(self.notes, 1)))
         return "\n\n".join(parts)

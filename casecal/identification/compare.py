@@ -41,8 +41,16 @@ class ModelComparison:
         return f"{shown}\nchosen by cross-validation: {self.best}"
 
 
-def _points(cal_robot, meas) -> np.ndarray:
-    return cal_robot.measured_points(meas.q).reshape(meas.n_poses, -1)
+def _points(cal, meas) -> np.ndarray:
+    """`cal`'s robot's measured points at `meas`' poses, (N, 3m): each pose through its
+    session's frames where `cal` fitted several."""
+    if not cal.sessions or meas.session is None:
+        return cal.robot.measured_points(meas.q).reshape(meas.n_poses, -1)
+    out = np.empty((meas.n_poses, meas.positions[0].size))
+    for label in meas.sessions:
+        rows = meas.session == label
+        out[rows] = cal.session_robot(label).measured_points(meas.q[rows]).reshape(rows.sum(), -1)
+    return out
 
 
 def _criteria(cal, meas, n_estimated: int) -> tuple[float, float]:
@@ -103,7 +111,7 @@ def compare_models(
                     f"model {name!r}, cross-validation fold {k + 1} of {folds} "
                     f"({train.n_poses} of {n} poses): {exc}; use fewer folds or more poses"
                 ) from None
-            miss = _points(part.robot, test) - test.positions.reshape(test.n_poses, -1)
+            miss = _points(part, test) - test.positions.reshape(test.n_poses, -1)
             errors.append(np.mean(np.sum(miss.reshape(-1, 3) ** 2, axis=1)))
         per_fold = np.sqrt(errors)
         aic, bic = _criteria(cal, measurements, len(cal.estimated))

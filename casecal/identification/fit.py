@@ -32,6 +32,7 @@ import pandas as pd
 from .._threads import with_one_blas_thread
 from ..data.measurements import Measurements, broadcast_sigma
 from ..errors import CalibrationError
+from ..model.parameters import select
 from ..model.robot import Robot
 from .analysis import represent, selection
 from .audit import audit
@@ -41,8 +42,13 @@ from .problem import Problem
 from .reference import FALLBACK_NOTE, frame_parameters, frames_fitted
 from .rounds import LOSSES, Settings, fit_in_rounds
 from .scale import door, with_size_check
+from .sessions import door as session_door
+from .sessions import fitted as fitted_sessions
+from .sessions import resolve as resolve_sessions
+from .sessions import session_robot, with_indicators
+from .sessions import start as session_start
 from .solvers import SOLVERS
-from .start import choose_frame, partial_base_start
+from .start import FitFrame, choose_frame, partial_base_start
 from .summary import outliers_lead, stand_out
 
 log = logging.getLogger(__name__)
@@ -69,6 +75,7 @@ def identify(
     loss: str = "linear",
     loss_scale: float = 3.0,
     progress=None,
+    per_session=None,
 ) -> Calibration:
     """Identify the parameter deviations of `robot` from measured positions.
 
@@ -122,10 +129,21 @@ def identify(
     progress : callable(str), optional
         Called with one line per solver iteration ("round 1, iteration 3: RMS 0.021 mm"),
         for showing the progress of long fits.
+    per_session : ("base",) or ("base", "tool"), optional
+        With measurements of two or more sessions (`Measurements.session`): which frames
+        each session has of its own. The robot's parameters are shared; every session's
+        base frame is estimated whatever `parameters` asks for (the first session's is
+        ``base_x`` …, the calibrated robot's; the others' ``base_x@LABEL`` …; a
+        ``base*`` in `parameters` names them all), and with ``"tool"`` its tool frame
+        too (``tool_x@LABEL`` …; for a probe re-mounted between sessions). Default: the
+        base only (or the frames `robot` has per session, for a `Calibration`'s
+        nominal). See `casecal.identification.sessions`.
 
     Returns
     -------
     Calibration
+        With sessions, `Calibration.sessions` gives each session's fitted frames, and
+        `Calibration.robot` is the calibrated robot with the first session's.
 
     Raises
     ------
@@ -137,7 +155,9 @@ def identify(
     loss_scale = _check_options(method, bounds, prior, loss, loss_scale)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
-    names = selection(robot, parameters)
+    sessions = resolve_sessions(robot, measurements, per_session)
+    robot = session_robot(robot, sessions)  # a frame per session; itself for one session
+    names = _selection(robot, parameters, sessions)
     if measurements.q.shape[1] not in (robot.dof, robot.n_inputs):
         extra = f" and {len(robot.inputs)} inputs" if robot.inputs else ""
         raise CalibrationError(
@@ -150,10 +170,15 @@ def identify(
 
             raise tree_refusal("orientation measurements")
         _with_points(robot, measurements.n_points)  # one point per tip, before the door
-    door(robot, measurements)  # unit slips, before any fit
+    if sessions is None:
+        door(robot, measurements)  # unit slips, before any fit
+    else:  # each session in its own instrument frame
+        session_door(robot, measurements, sessions, door)
     q, y = measurements.q, measurements.points  # y: (N, m, 3)
+    if sessions is not None:
+        q = with_indicators(robot, q, sessions)
     robot, point_note = _with_points(robot, measurements.n_points)
-    names = selection(robot, parameters) if point_note else names
+    names = _selection(robot, parameters, sessions) if point_note else names
     unknown = [n for n in {**bounds, **prior} if n not in names]
     if unknown:
         raise CalibrationError(
@@ -183,7 +208,10 @@ def identify(
     w = 1.0 / sigma if known else np.ones_like(sigma)
     w_rot = _orientation_weight(measurements, orientation_sigma, known, w)
 
-    frame, frame_note = choose_frame(robot, q, y, sigma, names, np.mean(w**2, axis=1))
+    if sessions is None:
+        frame, frame_note = choose_frame(robot, q, y, sigma, names, np.mean(w**2, axis=1))
+    else:  # one instrument frame per session: each base starts from its own rigid fit
+        frame, frame_note = FitFrame.identity(), ""
     make = _shared(
         partial(
             Problem,
@@ -195,7 +223,9 @@ def identify(
         )
     )
     start, start_note = robot, frame_note
-    if frame.is_identity:
+    if sessions is not None:
+        start, start_note = session_start(robot, q, y, w, sessions)
+    elif frame.is_identity:
         start, start_note = partial_base_start(robot, lambda r, n: make(r, names=n), names)
     e0 = point_rms(make(start, names=names).point_residuals(np.zeros(len(names))))
     settings = Settings(
@@ -234,7 +264,7 @@ def identify(
     cal = Calibration(
         method=method,
         nominal=robot,
-        robot=calibrated,
+        robot=session_robot(calibrated, None),  # the first session's frames
         parameters=tuple(names),
         estimated=out.estimated,
         deviations=calibrated.deviations_from(robot, names),  # rotations: not differences
@@ -276,8 +306,19 @@ def identify(
         joined=out.joined,
         pose_blind=got.facts.blind_here,
         still_joints=got.facts.still,
+        sessions={}
+        if sessions is None
+        else fitted_sessions(calibrated, se, point_residuals, sessions),
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+def _selection(robot: Robot, parameters, sessions) -> list[str]:
+    """The asked-for parameters; with sessions, every session's own frames too."""
+    names = selection(robot, parameters)
+    if sessions is None:
+        return names
+    return select(robot.parameter_names, [*names, *sessions.names()])
 
 
 SHARED_PROBLEMS = 3

@@ -105,6 +105,21 @@ def build_summary(cal: Calibration) -> Summary:
         table=cal.table,
         diagnostics="\n".join(diag),
         notes=tuple(_notes(cal)),
+        sessions=_sessions(cal),
+    )
+
+
+def _sessions(cal: Calibration) -> str:
+    """The sessions' fitted frames (mm, deg, ± one standard error), or "" for one."""
+    if not cal.sessions:
+        return ""
+    from .sessions import table_text
+
+    first = next(iter(cal.sessions))
+    return (
+        f"Frames of the {len(cal.sessions)} measurement sessions (the robot's base in each "
+        f"session's instrument frame, ± one standard error; session {first}'s is the calibrated "
+        f"robot's):\n{table_text(cal.sessions)}"
     )
 
 

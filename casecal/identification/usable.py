@@ -18,8 +18,12 @@ from .rank import UNPRUNED_PREFIXES
 
 def held_as_poorly_determined(cal: Calibration) -> tuple[str, ...]:
     """The estimates of `cal` that are poorly determined and may be held at nominal: not
-    the frames (base, reflectors), whose nominal is no value at all."""
-    return tuple(n for n in cal.poorly_determined if not n.startswith(UNPRUNED_PREFIXES))
+    the frames (base, reflectors), whose nominal is no value at all, nor the frames each
+    session has of its own (a fit of sessions always estimates them)."""
+    own = {n for fit in cal.sessions.values() for n in fit.names}
+    return tuple(
+        n for n in cal.poorly_determined if not n.startswith(UNPRUNED_PREFIXES) and n not in own
+    )
 
 
 def hold_poorly_determined(cal: Calibration, measurements, **options) -> Calibration:

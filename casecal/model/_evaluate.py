@@ -130,7 +130,7 @@ class Evaluator:
             with BUILDING:  # set "tried" only once the kernel (or None) is in place
                 if not self._native_tried:
                     self._native = _native.kernel(
-                        (self.chain.structure, self.kind, self.columns),
+                        (self.chain.structure.kernel_key, self.kind, self.columns),
                         lambda: self.function,
                         n_q=self.chain.structure.n_inputs,
                         n_p=n_p,

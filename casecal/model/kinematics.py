@@ -21,6 +21,19 @@ Modified DH (``"mdh"``, Craig), where ``a_i, alpha_i`` of row ``i`` are Craig's
 The whole chain is ``T = B · A_1 ⋯ A_n · E`` with base ``B`` and tool ``E`` each
 ``Trans(x, y, z) · Rz(rz) Ry(ry) Rx(rx)``.
 
+Sessions
+--------
+Measurements taken in several sessions, with the instrument (or the probe) re-mounted in
+between, see the robot through one frame per session (`Structure.sessions`). Each pose
+carries one indicator per later session, after its joints and inputs: ``e_s = 1`` for a
+pose of session ``s``, all 0 for the first session. The frame of a pose is then
+
+    B = (1 - Σ_s e_s) · B_1 + Σ_s e_s · B_s
+
+(and likewise the tool where each session has its own). For one-hot indicators this is
+exactly the pose's own session frame, bit for bit (products with exact 0 and 1), and the
+Jacobian columns of the other sessions' frames are exactly zero: one graph, one fit.
+
 Rotations about an anchor
 -------------------------
 A frame's rotation (base, tool, URDF origin) enters as ``Rz(ȳ) Ry(p̄) · Rz(yaw - ȳ)
@@ -62,7 +75,7 @@ from ..errors import CalibrationError
 from . import _trig
 from ._evaluate import BUILDING, COMPILE_MIN_POSES, HOT_CALLS, Evaluator, write_into
 from .chainwalk import walk, walk_tree
-from .parameters import parameter_names, urdf_parameter_names
+from .parameters import parameter_names, session_parameter_names, urdf_parameter_names
 from .rotation_chart import is_anchored
 
 log = logging.getLogger(__name__)
@@ -86,6 +99,10 @@ PARAMETER_JACOBIANS = (
     "points_jacobian",
     "points_and_jacobian",
 )
+
+
+# fields a serial chain of one session leaves empty, and out of its repr (`Structure`)
+OPTIONAL_FIELDS = ("parents", "tips", "sessions", "session_frames")
 
 
 @dataclass(frozen=True)
@@ -118,6 +135,11 @@ class Structure:
     tips : tuple of (str, int)
         A tree only: per measured tip, its link's name and the joint it hangs from. Empty
         for a serial chain, whose one measured point is the tool frame's (or `n_points`).
+    sessions : tuple of str
+        Labels of the measurement sessions after the first, each with frames of its own
+        (module doc); empty for one session.
+    session_frames : tuple of str
+        Which frames each session has of its own: ``("base",)`` or ``("base", "tool")``.
     """
 
     convention: str
@@ -132,21 +154,33 @@ class Structure:
     inputs: tuple = ()
     parents: tuple[int, ...] = ()
     tips: tuple[tuple[str, int], ...] = ()
+    sessions: tuple[str, ...] = ()
+    session_frames: tuple[str, ...] = ()
 
     def __repr__(self) -> str:
         # the compiled kernels' cache key (`casecal.model._native`): a serial chain's is
-        # what it was before trees, so that the fields of trees cost it nothing
+        # what it was before trees and sessions, so that their fields cost it nothing
         shown = [
             f"{f.name}={getattr(self, f.name)!r}"
             for f in dataclasses.fields(self)
-            if f.name not in ("parents", "tips") or getattr(self, f.name)
+            if f.name not in OPTIONAL_FIELDS or getattr(self, f.name)
         ]
         return f"Structure({', '.join(shown)})"
 
     @property
     def n_inputs(self) -> int:
-        """Per-pose inputs of the graph: the joint values, then the `inputs` (covariates)."""
-        return len(self.joint_types) + len(self.inputs)
+        """Per-pose inputs of the graph: the joint values, then the `inputs` (covariates),
+        then one indicator per later session (module doc)."""
+        return len(self.joint_types) + len(self.inputs) + len(self.sessions)
+
+    @property
+    def kernel_key(self) -> Structure:
+        """What names this structure's compiled kernels: itself, with the sessions' labels
+        numbered (labels name parameters; the graph does not depend on them)."""
+        if not self.sessions:
+            return self
+        numbered = tuple(str(k) for k in range(2, len(self.sessions) + 2))
+        return dataclasses.replace(self, sessions=numbered)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -164,7 +198,7 @@ class Structure:
             )
         else:
             names = parameter_names(len(self.joint_types), self.beta_joints, self.n_points)
-        return names + extra
+        return names + extra + session_parameter_names(self.sessions, self.session_frames)
 
 
 def needs_beta(convention: str, index: int, n_joints: int, alpha: float) -> bool:
@@ -370,12 +404,26 @@ class Chain:
             trig[self.names[k] + ANCHOR] = (acos[t], asin[t])
         P = {name: p[k] for k, name in enumerate(self.names)}
 
-        def frame(prefix):
-            xyz = [P[f"{prefix}_{a}"] for a in "xyz"]
-            return frame_transform(xyz, rotation_trig(trig, [f"{prefix}_r{a}" for a in "xyz"]))
-
-        base = frame("base")
         dof = len(structure.joint_types)
+
+        def frame(prefix, mark=""):
+            xyz = [P[f"{prefix}_{a}{mark}"] for a in "xyz"]
+            angles = [f"{prefix}_r{a}{mark}" for a in "xyz"]
+            return frame_transform(xyz, rotation_trig(trig, angles))
+
+        def session_frame(prefix):
+            # each pose's own session's frame, exact for one-hot indicators (module doc)
+            first = frame(prefix)
+            if prefix not in structure.session_frames:
+                return first
+            at = dof + len(structure.inputs)
+            e = [q[at + k] for k in range(len(structure.sessions))]
+            out = (1 - sum(e[1:], e[0])) * first
+            for e_s, label in zip(e, structure.sessions, strict=True):
+                out = out + e_s * frame(prefix, "@" + label)
+            return out
+
+        base = session_frame("base")
         q_eff = [q[i] for i in range(dof)]
         if structure.tips:
             if structure.terms or structure.n_points:
@@ -388,7 +436,7 @@ class Chain:
             rigid = walk(structure, base, q_eff, P, trig)
             gravity = base[:3, :3] @ ca.DM(structure.gravity) * STANDARD_GRAVITY
             inputs = {name: q[dof + k] for k, (name, _) in enumerate(structure.inputs)}
-            tool = rigid.T @ frame("tool")
+            tool = rigid.T @ session_frame("tool")
             own = {n for t in structure.terms for n in t.parameters}
             deltas, after = joint_deltas(
                 structure.terms,
@@ -402,9 +450,9 @@ class Chain:
             )
             q_eff = [qi + d for qi, d in zip(q_eff, deltas, strict=True)]
             T = walk(structure, base, q_eff, P, trig, after).T
-            return _Graph(*symbols, T @ frame("tool"), *joints)
+            return _Graph(*symbols, T @ session_frame("tool"), *joints)
         T = walk(structure, base, q_eff, P, trig, joint_trig=joint_trig).T
-        return _Graph(*symbols, T @ frame("tool"), *joints)
+        return _Graph(*symbols, T @ session_frame("tool"), *joints)
 
     def extended(self, p: np.ndarray, anchor: np.ndarray | None = None) -> np.ndarray:
         """The graph's input: `p`, cos and sin of its constant angles (pitches and yaws less
@@ -566,7 +614,8 @@ class Chain:
             "points", "points_jacobian" (3m × k per pose), "points_and_jacobian" (the
             same with the points as a last column), "joint_jacobian".
         q : ndarray, shape (N, dof), float64
-            Joint values (rad for R, m for P), already validated.
+            Joint values (rad for R, m for P), already validated; then the per-pose
+            inputs and session indicators (module doc), where the structure has them.
         p : ndarray, shape (n_params,), float64
             Full parameter vector, SI (extended here with the cosines and sines).
         columns : tuple of int
@@ -592,6 +641,10 @@ class Chain:
             # poses without the per-pose inputs take their reference values
             reference = [value for _, value in self.structure.inputs]
             q = np.hstack([q, np.broadcast_to(reference, (q.shape[0], len(reference)))])
+        sessions = len(self.structure.sessions)
+        if sessions and q.shape[1] == self.structure.n_inputs - sessions:
+            # poses without session indicators are the first session's
+            q = np.hstack([q, np.zeros((q.shape[0], sessions))])
         if q.shape[0] < COMPILE_MIN_POSES:
             hot = self._small_calls[kind] = self._small_calls.get(kind, 0) + 1
             if hot >= HOT_CALLS:

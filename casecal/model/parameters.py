@@ -8,6 +8,12 @@ The full parameter vector of a robot is, in this order:
   ``base_rz`` (rad);
 - the tool frame: ``tool_x`` … ``tool_rz``, likewise.
 
+A robot measured in several sessions (`casecal.model.robot.Session`: the instrument, or
+the probe, re-mounted between them) has, after all of these and the error terms'
+parameters, one more frame per session beyond the first, named after the session's label:
+``base_x@B`` … ``base_rz@B`` (and ``tool_x@B`` … where each session has its own tool). The
+first session's frames are the plain ``base_*`` and ``tool_*``.
+
 A robot read from a URDF has, instead of the DH rows, per movable joint the six numbers of
 its origin in the file's own frames, named after the joint: ``{joint}.x``, ``.y``, ``.z``
 (m), ``.roll``, ``.pitch``, ``.yaw`` (rad), and for a revolute joint a zero offset of the
@@ -39,9 +45,53 @@ LENGTH_FAMILIES = frozenset({"d", "a"})
 _JOINT_RE = re.compile(r"^(theta|alpha|beta|d|a)(\d+)$")
 
 
-def frame_names(frame: str) -> tuple[str, ...]:
-    """The six names of a frame's parameters, e.g. ``base_x`` … ``base_rz``."""
-    return tuple(f"{frame}_{axis}" for axis in FRAME_AXES)
+def frame_names(frame: str, session: str = "") -> tuple[str, ...]:
+    """The six names of a frame's parameters, e.g. ``base_x`` … ``base_rz``; of a later
+    session's frame (`session`: its label), ``base_x@B`` … ``base_rz@B``."""
+    mark = f"{SESSION_MARK}{session}" if session else ""
+    return tuple(f"{frame}_{axis}{mark}" for axis in FRAME_AXES)
+
+
+SESSION_MARK = "@"
+"""Separates a per-session frame parameter's name from its session's label: ``base_x@B``."""
+
+SESSION_FRAMES = ("base", "tool")
+"""The frames a session may have of its own: where the instrument stood, where the probe sat."""
+
+_LABEL_RE = re.compile(r"^[\w-]+$")
+
+
+def plain_name(name: str) -> str:
+    """`name` without its session label: ``base_rx@B`` -> ``base_rx``."""
+    return name.split(SESSION_MARK, 1)[0]
+
+
+def session_label(name: str) -> str:
+    """The session label of a per-session parameter (``base_x@B`` -> ``B``), else ``""``."""
+    return name.partition(SESSION_MARK)[2]
+
+
+def check_session_label(label, where: str = "") -> str:
+    """`label` as a str fit to name parameters (``base_x@label``), or a CalibrationError.
+
+    Letters (any script), digits, ``_`` and ``-``: a space, ``@``, ``.``, ``,`` or a
+    wildcard would make names that `select` and the name rules misread.
+    """
+    at = f" ({where})" if where else ""
+    if not isinstance(label, str):
+        raise CalibrationError(f"session label {label!r}{at} is not text: give labels as str")
+    text = label
+    if not _LABEL_RE.match(text):
+        raise CalibrationError(
+            f"session label {label!r}{at} cannot name parameters (base_x@LABEL): use "
+            "letters, digits, '_' or '-' only, e.g. 'day1' or '2024-05-03'"
+        )
+    return text
+
+
+def session_parameter_names(labels: Sequence[str], frames: Sequence[str]) -> tuple[str, ...]:
+    """The names of the later sessions' own frames: per label, per frame, six names."""
+    return tuple(n for label in labels for frame in frames for n in frame_names(frame, label))
 
 
 def parameter_names(
@@ -172,6 +222,7 @@ def is_length(name: str) -> bool:
     compliance terms' own units, `unit`)."""
     if _COMPLIANCE_RE.match(name) or _LUMPED_RE.match(name):
         return False
+    name = plain_name(name)
     if "." in name:  # a URDF joint's origin: {joint}.x … {joint}.offset
         return name.rsplit(".", 1)[1] in ("x", "y", "z")
     match = _JOINT_RE.match(name)

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import CalibrationError
 from . import kinematics
-from .parameters import FRAME_AXES, select
+from .parameters import FRAME_AXES, SESSION_FRAMES, check_session_label, select
 from .rotation_chart import deviated, deviations_between
 
 DEFAULT_REVOLUTE_LIMITS = (-math.pi, math.pi)
@@ -64,6 +64,26 @@ class Frame:
 
 
 @dataclass(frozen=True)
+class Session:
+    """The frames of a measurement session after the first (`Robot.sessions`).
+
+    Attributes
+    ----------
+    label : str
+        The session's label, which names its parameters (``base_x@label``): letters,
+        digits, ``_`` and ``-`` (`casecal.model.parameters.check_session_label`).
+    base : Frame
+        Where the instrument stood in this session: its base frame, SI.
+    tool : Frame or None
+        The session's own tool frame (the probe re-mounted), SI; None: the robot's tool.
+    """
+
+    label: str
+    base: Frame = field(default_factory=Frame)
+    tool: Frame | None = None
+
+
+@dataclass(frozen=True)
 class Robot:
     """An immutable serial arm: DH table, convention, base and tool frames.
 
@@ -108,6 +128,13 @@ class Robot:
         A kinematic tree (several measured tips, `casecal.model.tree`): per joint the index
         of the joint it hangs from (-1: the base), and the tips with their frames, which
         replace the tool frame. Both empty for a serial chain.
+    sessions : tuple of Session
+        For measurements of several sessions (the instrument re-mounted between them): the
+        frames of every session after the first, whose frames are `base` and `tool`.
+        Joint arrays then carry one indicator per later session after the joints and
+        inputs (1 in its session's column, all 0 for the first session; a pose without
+        them is the first session's); see `with_sessions` and `casecal.model.kinematics`.
+        Empty by default: one session.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -132,6 +159,7 @@ class Robot:
     payload_com: tuple[float, float, float] = (0.0, 0.0, 0.0)
     parents: tuple[int, ...] = ()
     tip_frames: tuple = ()
+    sessions: tuple = ()
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
@@ -144,6 +172,7 @@ class Robot:
         object.__setattr__(self, "terms", tuple(self.terms))
         check_terms(self)
         object.__setattr__(self, "terms", refreshed(self))
+        object.__setattr__(self, "sessions", _sessions(self.name, self.sessions))
         if self.convention not in ("dh", "mdh", "urdf"):
             raise CalibrationError(
                 f"robot {self.name!r}: convention {self.convention!r} is unknown; "
@@ -217,6 +246,34 @@ class Robot:
             known[name] = float(value)
         return dataclasses.replace(self, inputs=tuple(known.items()), auto_beta=False)
 
+    def with_sessions(self, labels, frames=("base",)) -> Robot:
+        """A new Robot measured in sessions: `labels` (str) of the sessions after the first,
+        each with its own `frames` (``("base",)`` or ``("base", "tool")``), starting at
+        this robot's base and tool. No labels: the robot without sessions."""
+        frames = tuple(frames)
+        unknown = [f for f in frames if f not in SESSION_FRAMES]
+        if unknown or "base" not in frames:
+            raise CalibrationError(
+                f"per-session frames {frames!r}: give ('base',) or ('base', 'tool'); each "
+                "session has its own base frame (where the instrument stood)"
+            )
+        if self.tip_frames and "tool" in frames:
+            raise CalibrationError(
+                "a tree has no tool frame: its tips' frames are shared by every session; "
+                "give per-session frames ('base',)"
+            )
+        tool = self.tool if "tool" in frames else None
+        sessions = tuple(Session(label, self.base, tool) for label in labels)
+        return dataclasses.replace(self, sessions=sessions, auto_beta=False)
+
+    @property
+    def session_frames(self) -> tuple[str, ...]:
+        """Which frames each later session has of its own: () without sessions, else
+        ``("base",)`` or ``("base", "tool")``."""
+        if not self.sessions:
+            return ()
+        return ("base", "tool") if self.sessions[0].tool is not None else ("base",)
+
     @property
     def joint_types(self) -> str:
         """One letter per joint, e.g. ``"RRPR"``."""
@@ -232,6 +289,9 @@ class Robot:
         if self.tip_frames:
             extra["parents"] = self.parents
             extra["tips"] = tuple((t.name, t.parent) for t in self.tip_frames)
+        if self.sessions:
+            extra["sessions"] = tuple(s.label for s in self.sessions)
+            extra["session_frames"] = self.session_frames
         if self.convention == "urdf":
             return kinematics.Structure(
                 "urdf",
@@ -275,7 +335,15 @@ class Robot:
         values += [*self.base.xyz, *self.base.rpy, *self.tool.xyz, *self.tool.rpy]
         values += [v for p in self.points for v in p]
         values += [v for t in self.terms for v in t.values]
-        return np.array(values, dtype=float)
+        return np.array(values + self._session_values(), dtype=float)
+
+    def _session_values(self) -> list[float]:
+        """The later sessions' own frames, in the order of `session_parameter_names`."""
+        values: list[float] = []
+        for session in self.sessions:
+            for frame in [session.base] + ([session.tool] if session.tool is not None else []):
+                values += [*frame.xyz, *frame.rpy]
+        return values
 
     def _tree_vector(self) -> np.ndarray:
         """`vector` of a tree: its tips' frames, the joints in the order of
@@ -288,7 +356,8 @@ class Robot:
             j = self.joints[i]
             values += [v for p in j.passive for v in (*p.xyz, *p.rpy)]
             values += [*j.xyz, *j.rpy] + ([j.offset] if j.type == "R" else [])
-        return np.array([*values, *self.base.xyz, *self.base.rpy], dtype=float)
+        values += [*self.base.xyz, *self.base.rpy]
+        return np.array(values + self._session_values(), dtype=float)
 
     @property
     def limits(self) -> np.ndarray:
@@ -354,9 +423,18 @@ class Robot:
             p[name] = value
         from .vector import joints_from
 
-        def frame(prefix: str) -> Frame:
-            v = [p[f"{prefix}_{axis}"] for axis in FRAME_AXES]
+        def frame(prefix: str, mark: str = "") -> Frame:
+            v = [p[f"{prefix}_{axis}{mark}"] for axis in FRAME_AXES]
             return Frame(tuple(v[:3]), tuple(v[3:]))
+
+        sessions = tuple(
+            Session(
+                s.label,
+                frame("base", "@" + s.label),
+                None if s.tool is None else frame("tool", "@" + s.label),
+            )
+            for s in self.sessions
+        )
 
         points = tuple(
             tuple(p[f"point{k}_{a}"] for a in "xyz") for k in range(1, len(self.points) + 1)
@@ -380,6 +458,7 @@ class Robot:
             points=points,
             terms=terms,
             tip_frames=tips,
+            sessions=sessions,
             auto_beta=False,
         )
 
@@ -487,7 +566,7 @@ class Robot:
         Shape (N, m, 3) for q (N, dof), (m, 3) for one pose; with no `points` the tool
         origin is the one point (m = 1).
         """
-        q2, single = check_joint_values(q, self.dof, len(self.inputs))
+        q2, single = check_joint_values(q, self.dof, len(self.inputs), len(self.sessions))
         ch = kinematics.chain(self.structure)
         out = ch.evaluate("points", q2, self.vector()).reshape(q2.shape[0], -1, 3)
         return out[0] if single else out
@@ -542,7 +621,7 @@ class Robot:
         return self._evaluate("pose_jacobian", q, names, deviations), names
 
     def _evaluate(self, kind: str, q, names: Sequence[str] = (), deviations=False) -> np.ndarray:
-        q2, single = check_joint_values(q, self.dof, len(self.inputs))
+        q2, single = check_joint_values(q, self.dof, len(self.inputs), len(self.sessions))
         ch = kinematics.chain(self.structure)
         p = self.vector()
         columns = ch.columns(names) if names else ()
@@ -553,6 +632,24 @@ class Robot:
         return f"Robot({self.name!r}, {self.joint_types}, convention={self.convention!r})"
 
 
+def _sessions(name: str, sessions) -> tuple[Session, ...]:
+    """`sessions` checked: Session objects with clean, distinct labels, and the same
+    frames of their own (each a tool, or none)."""
+    sessions = tuple(sessions)
+    if not sessions:
+        return ()
+    if not all(isinstance(s, Session) for s in sessions):
+        raise CalibrationError(f"robot {name!r}: sessions must be casecal.model.robot.Session")
+    labels = [check_session_label(s.label) for s in sessions]
+    if len(set(labels)) != len(labels):
+        raise CalibrationError(f"robot {name!r}: session labels repeat: {', '.join(labels)}")
+    if len({s.tool is None for s in sessions}) > 1:
+        raise CalibrationError(
+            f"robot {name!r}: give every session its own tool frame, or none of them"
+        )
+    return sessions
+
+
 def _points(name: str, points) -> tuple[tuple[float, float, float], ...]:
     points = tuple(tuple(float(v) for v in p) for p in points)
     if any(len(p) != 3 or not all(math.isfinite(v) for v in p) for p in points):
@@ -560,10 +657,12 @@ def _points(name: str, points) -> tuple[tuple[float, float, float], ...]:
     return points
 
 
-def check_joint_values(q, dof: int, inputs: int = 0) -> tuple[np.ndarray, bool]:
+def check_joint_values(q, dof: int, inputs: int = 0, sessions: int = 0) -> tuple[np.ndarray, bool]:
     """Validate joint values and return them as a C-contiguous float64 (N, dof) array.
 
-    With `inputs` > 0 the robot reads per-pose inputs: (N, dof + inputs) is accepted too.
+    With `inputs` > 0 the robot reads per-pose inputs: (N, dof + inputs) is accepted too;
+    with `sessions` > 0 session indicators after them (`Robot.sessions`): (N, dof + inputs
+    + sessions) too.
 
     Returns
     -------
@@ -577,7 +676,8 @@ def check_joint_values(q, dof: int, inputs: int = 0) -> tuple[np.ndarray, bool]:
         raise CalibrationError(f"joint values are not numbers: {exc}") from None
     single = arr.ndim == 1
     arr = np.atleast_2d(arr)
-    if arr.ndim != 2 or arr.shape[1] not in (dof, dof + inputs) or arr.shape[0] == 0 or dof == 0:
+    widths = (dof, dof + inputs) + ((dof + inputs + sessions,) if sessions else ())
+    if arr.ndim != 2 or arr.shape[1] not in widths or arr.shape[0] == 0 or dof == 0:
         raise CalibrationError(
             f"joint values have shape {np.shape(q)}; give shape ({dof},) for one pose or "
             f"(N, {dof}) for N >= 1 poses of a robot with {dof} joints"

@@ -42,15 +42,17 @@ from .frames import matrix_from_rpy, rpy_from_matrix
 
 def triples(names) -> list[tuple[str, str, str]]:
     """The (roll, pitch, yaw) names of every rotation among `names`: the base and tool
-    frames' ``_rx, _ry, _rz`` and each URDF origin's ``.roll, .pitch, .yaw``."""
+    frames' ``_rx, _ry, _rz`` (a later session's too: ``base_rx@B``) and each URDF
+    origin's ``.roll, .pitch, .yaw``."""
     out = []
     for name in names:
+        plain, mark, label = name.partition("@")
         if "." in name:
             if name.endswith(".roll"):
                 joint = name[: -len("roll")]
                 out.append((name, joint + "pitch", joint + "yaw"))
-        elif name in ("base_rx", "tool_rx"):
-            out.append((name, name[:-1] + "y", name[:-1] + "z"))
+        elif plain in ("base_rx", "tool_rx"):
+            out.append((name, plain[:-1] + "y" + mark + label, plain[:-1] + "z" + mark + label))
     return out
 
 
@@ -59,7 +61,7 @@ def is_anchored(name: str) -> bool:
     relative to an anchor (`casecal.model.kinematics.Chain.extended`)."""
     if "." in name:
         return name.rsplit(".", 1)[1] in ("pitch", "yaw")
-    return name in ("base_ry", "base_rz", "tool_ry", "tool_rz")
+    return name.partition("@")[0] in ("base_ry", "base_rz", "tool_ry", "tool_rz")
 
 
 def _yaw_pitch(rpy0) -> np.ndarray:

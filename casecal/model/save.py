@@ -24,6 +24,13 @@ def export(robot, path) -> Export:
         An unknown extension, a robot the format cannot describe at all, or a text that
         reads back other than it should (a bug: nothing is to be written).
     """
+    if robot.sessions:
+        # a file holds one base frame: the others would be lost without a word
+        raise CalibrationError(
+            f"robot {robot.name!r} has frames of {len(robot.sessions) + 1} measurement "
+            "sessions and a robot file holds one; save the calibrated robot "
+            "(Calibration.robot, with the first session's frames)"
+        )
     suffix = Path(path).suffix.lower()
     if suffix == ".toml":
         from .catalog import robot_from_dict, robot_to_toml
