@@ -314,7 +314,9 @@ def _representation(calibrated, final, frame, make_world, names, out, se):
     if out.end_analysis is out.start_analysis:  # one-shot: what it saw where it linearised
         final = make_world(frame.robot_out(out.start_robot), names=names)
     R = final.reduced(np.zeros(len(names))).R
-    return represent(R, names, out.estimated, out.pruned, standard_errors=se)
+    return represent(
+        R, names, out.estimated, out.pruned, standard_errors=se, sizes=calibrated.sizes
+    )
 
 
 def verdict(checks, solver_status: int, solver_message: str | None) -> tuple[int, str]:

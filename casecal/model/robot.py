@@ -104,6 +104,13 @@ class Robot:
         arrays may then carry them as extra columns after the joints (`with_inputs`).
     payload_com : (float, float, float)
         The payload's centre of mass in the tool frame, m (with a ``payload_kg`` input).
+    sizes : tuple of (str, float, float)
+        This robot's own sizes of a real deviation, ``(unit, plausible, poorly)`` per SI
+        unit ("m", "rad", …), in place of the industrial defaults of
+        `casecal.model.parameters.UNITS` (2.5 mm and 1 mm, 0.5° and 0.1°): the largest
+        deviation expected of it, and the standard error past which an estimate is poorly
+        determined. Empty (the default): the industrial sizes. Set with `with_plausible`;
+        they decide what identification holds, and are no part of the kinematics.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -126,12 +133,16 @@ class Robot:
     gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
     inputs: tuple = ()
     payload_com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sizes: tuple = ()
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
+        from .parameters import checked_sizes
         from .terms import check_terms, refreshed
 
         object.__setattr__(self, "terms", tuple(self.terms))
+        if self.sizes:
+            object.__setattr__(self, "sizes", checked_sizes(self.sizes, f"robot {self.name!r}"))
         check_terms(self)
         object.__setattr__(self, "terms", refreshed(self))
         if self.convention not in ("dh", "mdh", "urdf"):
@@ -192,6 +203,73 @@ class Robot:
                 raise CalibrationError(f"input name {name!r}: use a word like temperature_c")
             known[name] = float(value)
         return dataclasses.replace(self, inputs=tuple(known.items()), auto_beta=False)
+
+    def with_plausible(
+        self, length: float | None = None, angle: float | None = None, **by_unit
+    ) -> Robot:
+        """A new Robot with its own sizes of a real deviation (`sizes`), SI.
+
+        Identification holds a parameter whose standard error exceeds its unit's plausible
+        deviation (and whose effect is below the noise), and calls an estimate whose
+        standard error exceeds the poorly determined bound poorly determined (the
+        command's ``identify -o`` does not write those). The industrial defaults
+        (`casecal.model.parameters.UNITS`: 2.5 mm, 0.5°) suit a calibrated-class arm; a
+        robot whose links are off by centimetres (a humanoid measured by motion capture)
+        needs its own, or its fits hold at their start what the data do see.
+
+        Parameters
+        ----------
+        length : float or (float, float), optional
+            The plausible deviation of lengths, m; alone, the poorly determined bound is
+            the default's in the same ratio (0.4: 10 mm gives 4 mm); a pair gives
+            ``(plausible, poorly)``. None: unchanged.
+        angle : float or (float, float), optional
+            The same for angles, rad (ratio 0.2: 2° gives 0.4°).
+        **by_unit : float or (float, float)
+            Other units by their key in `UNITS`, e.g. ``**{"rad/(N·m)": 1e-4}``.
+
+        Returns
+        -------
+        Robot
+            Sizes given replace this robot's, the others kept; a unit given its default
+            sizes has none of its own again (``robot.with_plausible(length=2.5e-3,
+            angle=math.radians(0.5))`` is the robot without sizes).
+
+        Raises
+        ------
+        CalibrationError
+            A unit casecal does not know, or a size that is not a positive finite number.
+
+        Examples
+        --------
+        >>> humanoid = robot.with_plausible(length=0.01, angle=math.radians(2))  # doctest: +SKIP
+        """
+        from .parameters import SIZE_WORDS, checked_sizes, sized
+
+        label = f"robot {self.name!r}"
+        given = dict(by_unit)
+        for word, value in (("length", length), ("angle", angle)):
+            if value is not None:
+                if SIZE_WORDS[word] in given:
+                    raise CalibrationError(
+                        f"{label}: {word} and {SIZE_WORDS[word]!r} both give the size of "
+                        f"unit {SIZE_WORDS[word]!r}; give one"
+                    )
+                given[SIZE_WORDS[word]] = value
+        kept = {si: (p, q) for si, p, q in self.sizes}
+        for si, value in given.items():
+            _, p, q = sized(si, value, label)
+            kept[si] = (p, q)
+        sizes = checked_sizes([(si, p, q) for si, (p, q) in kept.items()], label)
+        return dataclasses.replace(self, sizes=sizes, auto_beta=False)
+
+    def unit_facts(self, name: str):
+        """What this robot takes a real deviation of parameter `name` to be: its unit's
+        `casecal.model.parameters.Unit` with this robot's `sizes` (``.plausible``,
+        ``.poorly``, SI)."""
+        from .parameters import facts_of
+
+        return facts_of(name, self.sizes)
 
     @property
     def joint_types(self) -> str:
