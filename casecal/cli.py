@@ -103,8 +103,19 @@ def parse_angle(text: str) -> float:
     return value
 
 
+def _with_sizes(robot, args: argparse.Namespace):
+    """`robot` with --plausible-length-mm and --plausible-angle-deg, over its file's."""
+    length, angle = args.plausible_length_mm, args.plausible_angle_deg
+    if length is None and angle is None:
+        return robot
+    return robot.with_plausible(
+        length=None if length is None else length * 1e-3,
+        angle=None if angle is None else math.radians(angle),
+    )
+
+
 def _cmd_identify(args: argparse.Namespace) -> None:
-    robot = robot_for(args, args.robot)
+    robot = _with_sizes(robot_for(args, args.robot), args)
     if args.pairs:
         unsupported = [
             flag
@@ -320,7 +331,7 @@ def _deviations_text(cal, path: str) -> str:
 def _cmd_calibrate_until(args: argparse.Namespace) -> None:
     from .design.campaign import calibrate_until, pool_measure
 
-    robot = robot_for(args, args.robot)
+    robot = _with_sizes(robot_for(args, args.robot), args)
     pool = read_csv(args.pool, robot)
     if args.output:
         _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
@@ -598,6 +609,23 @@ def build_parser() -> argparse.ArgumentParser:
             help="random seed for uniform poses and noise (default 0)",
         )
 
+    def add_sizes(p):
+        for flag, what, ratio, default in (
+            ("--plausible-length-mm", "lengths, mm", "0.4", "2.5"),
+            ("--plausible-angle-deg", "angles, degrees", "0.2", "0.5"),
+        ):
+            p.add_argument(
+                flag,
+                type=cli_args.size,
+                default=None,
+                metavar="SIZE",
+                help=f"the largest deviation expected of the robot's {what}: a parameter "
+                "whose standard error exceeds it (while it moves the points by less than the "
+                f"noise) is held, and an estimate whose standard error exceeds {ratio} of it "
+                "is poorly determined (not written) (default: the robot file's [plausible], "
+                f"else {default})",
+            )
+
     robot_out_help = (
         "write the calibrated robot here: .toml, .urdf (a URDF robot's own file with the "
         "calibrated numbers; a DH robot as a new URDF) or .yaml (UR kinematics file)"
@@ -710,6 +738,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="fail (exit 2, nothing written) if any asked-for parameter cannot be identified, "
         "instead of holding it at nominal and saying so",
     )
+    add_sizes(p)
     p.add_argument("-o", "--output", metavar="FILE", help=robot_out_help)
     p.set_defaults(func=_cmd_identify)
 
@@ -748,6 +777,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="how to choose the next poses (default optimal)",
     )
     p.add_argument("--parameters", default=None, help=params_help)
+    add_sizes(p)
     p.add_argument("-o", "--output", metavar="FILE", help=robot_out_help)
     p.set_defaults(func=_cmd_calibrate_until)
 

@@ -23,11 +23,24 @@ A robot file is TOML::
 ``points = [[x, y, z], …]`` (top level, length_unit) lists measured points (reflectors) in the
 tool frame; without it the tool frame's origin is the measured point. ``full_name``,
 ``variant``, ``source`` (list of strings) and ``confidence`` are optional descriptions.
+
+An optional ``[plausible]`` table gives the robot's own sizes of a real deviation
+(`Robot.with_plausible`), each key naming its unit (whatever length_unit and angle_unit
+say)::
+
+    [plausible]                # the largest deviations expected of this robot
+    length_mm = 10.0           # or length_m; default 2.5 mm
+    angle_deg = 2.0            # or angle_rad; default 0.5°
+    "rad/(N·m)" = 1e-4         # other units by name (casecal.model.parameters.UNITS), SI
+    [plausible.poorly]         # optional: standard errors above these are poorly determined
+    length_mm = 4.0            # default: the plausible size times the default's ratio
+    angle_deg = 0.4            # (1 mm / 2.5 mm = 0.4 for lengths, 0.1° / 0.5° = 0.2 for angles)
 Every mistake raises `CalibrationError` naming the file, the key and the fix.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from pathlib import Path
@@ -57,6 +70,7 @@ _TOP_KEYS = TOP_KEYS | {
     "source",
     "confidence",
     "description",
+    "plausible",
 }
 _JOINT_KEYS = {"type", "a", "alpha", "d", "theta", "beta", "limits"}
 _FRAME_KEYS = {"xyz", "rpy"}
@@ -243,7 +257,68 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
         source=source,
         confidence=str(data.get("confidence", "")),
     )
-    return add_terms(robot, data, angle, label, _number, length)
+    robot = add_terms(robot, data, angle, label, _number, length)
+    sizes = _sizes(data, label)
+    return dataclasses.replace(robot, sizes=sizes, auto_beta=False) if sizes else robot
+
+
+_SIZE_KEYS = {
+    "length_m": ("m", 1.0),
+    "length_mm": ("m", 1e-3),
+    "angle_rad": ("rad", 1.0),
+    "angle_deg": ("rad", math.pi / 180.0),
+}
+"""Keys of a robot file's ``[plausible]`` table: unit and factor to SI (other units by
+their `casecal.model.parameters.UNITS` key, in SI)."""
+
+
+def _sizes(data: dict, label: str) -> tuple:
+    """The ``[plausible]`` table of a robot file as `Robot.sizes` (module doc)."""
+    from .parameters import UNITS, checked_sizes
+
+    table = data.get("plausible")
+    if table is None:
+        return ()
+    if not isinstance(table, dict):
+        raise CalibrationError(
+            f"{label}: plausible must be a table, e.g. [plausible] with length_mm = 10.0 and "
+            "angle_deg = 2.0"
+        )
+    poorly = table.get("poorly", {})
+    if not isinstance(poorly, dict):
+        raise CalibrationError(
+            f"{label}: plausible.poorly must be a table, e.g. [plausible.poorly] with "
+            "length_mm = 4.0"
+        )
+    plausible = _size_table({k: v for k, v in table.items() if k != "poorly"}, label, "plausible")
+    bounds = _size_table(poorly, label, "plausible.poorly")
+    triples = []
+    for si in sorted(set(plausible) | set(bounds)):
+        default = UNITS[si]
+        p = plausible.get(si, default.plausible)
+        q = bounds.get(si, p * default.poorly / default.plausible)
+        triples.append((si, p, q))
+    return checked_sizes(triples, label)
+
+
+def _size_table(table: dict, label: str, where: str) -> dict:
+    from .parameters import UNITS
+
+    out: dict[str, float] = {}
+    for key, value in table.items():
+        si, scale = _SIZE_KEYS.get(key, (key, 1.0))
+        if si not in UNITS:
+            raise CalibrationError(
+                f"{label}: unknown key '{key}' at [{where}]; allowed keys: "
+                f"{', '.join(_SIZE_KEYS)} or a unit by name ({', '.join(map(repr, UNITS))}, SI)"
+            )
+        if si in out:
+            raise CalibrationError(
+                f"{label}: [{where}] gives the size of {'lengths' if si == 'm' else 'angles'} "
+                "twice; keep one key"
+            )
+        out[si] = _number(value, label, f"{where}.{key}") * scale
+    return out
 
 
 def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:

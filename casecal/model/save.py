@@ -45,6 +45,17 @@ def export(robot, path) -> Export:
             from .ur_kinematics import ur_kinematics_contract as contract_of
             from .ur_kinematics import ur_kinematics_text as writer
         text, notes = writer(robot)
+        if robot.sizes:  # no kinematics, so no loss the read-back check could see
+            from .parameters import sizes_text
+
+            notes = [
+                *notes,
+                f"the robot's own sizes of a real deviation ({sizes_text(robot.sizes)}) "
+                "have no place in this file and are not written: a fit of the robot read "
+                "from it uses the industrial defaults; save as .toml to keep them, or give "
+                "them again (Robot.with_plausible, identify --plausible-length-mm and "
+                "--plausible-angle-deg)",
+            ]
         contract = contract_of(robot, str(path))
         if robot.terms:
             names = ", ".join(sorted({t.kind.replace("_", " ") for t in robot.terms}))

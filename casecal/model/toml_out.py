@@ -59,7 +59,29 @@ def robot_to_toml(robot: Robot) -> str:
         top += 1
     at = lines.index('angle_unit = "rad"') + 1
     lines[at:at] = extra[:top]
-    return "\n".join(lines + extra[top:]) + "\n"
+    return "\n".join(lines + extra[top:] + _sizes_lines(robot)) + "\n"
+
+
+def _sizes_lines(robot: Robot) -> list[str]:
+    """The robot's own sizes (`Robot.sizes`) as a ``[plausible]`` table, SI to the last
+    digit (the comment gives mm and degrees); none for the defaults."""
+    if not robot.sizes:
+        return []
+    from .parameters import UNITS
+
+    keys = {"m": "length_m", "rad": "angle_rad"}
+
+    def table(header: str, index: int) -> list[str]:
+        rows = ["", header]
+        for si, *values in robot.sizes:
+            facts, value = UNITS[si], values[index]
+            key = keys.get(si, _q(si))
+            unit = "°" if facts.shown == "deg" else " " + facts.shown
+            shown = f"{value * facts.factor:.6g}{unit}"
+            rows.append(f"{key} = {float(value)!r}  # {shown}")
+        return rows
+
+    return table("[plausible]", 0) + table("[plausible.poorly]", 1)
 
 
 def _q(text: str) -> str:
