@@ -145,6 +145,23 @@ def identify(
             f"{robot.name!r} has {robot.dof} joints{extra}; use the robot the data came from"
         )
     door(robot, measurements)  # unit slips, before any fit
+    if robot.coupling is not None:
+        return _coupled(
+            robot,
+            measurements,
+            parameters,
+            method,
+            noise=noise,
+            bounds=bounds or None,
+            prior=prior or None,
+            max_iterations=max_iterations,
+            tolerance=tolerance,
+            truth=truth,
+            orientation_sigma=orientation_sigma,
+            loss=loss,
+            loss_scale=loss_scale,
+            progress=progress,
+        )
     q, y = measurements.q, measurements.points  # y: (N, m, 3)
     robot, point_note = _with_points(robot, measurements.n_points)
     names = selection(robot, parameters) if point_note else names
@@ -272,6 +289,25 @@ def identify(
         still_joints=got.facts.still,
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+def _coupled(robot: Robot, measurements: Measurements, *args, **options) -> Calibration:
+    """`identify` for a robot whose controller joints are coupled (`Robot.coupling`): the
+    kernels take the model's joints, so the controller's are mapped once, here, and the
+    model alone is fitted (the coupling is no parameter); the result has the coupled
+    robots back, and its joint words (`still_joints`) name the controller's joints."""
+    import dataclasses
+
+    from .evidence import still_joints
+
+    model = dataclasses.replace(measurements, q=robot.model_joints(measurements.q))
+    cal = identify(robot.uncoupled(), model, *args, **options)
+    return dataclasses.replace(
+        cal,
+        nominal=robot,
+        robot=cal.robot.recoupled(robot),
+        still_joints=still_joints(measurements.q, robot),
+    )
 
 
 SHARED_PROBLEMS = 3

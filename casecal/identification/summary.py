@@ -147,6 +147,13 @@ def _notes(cal: Calibration) -> list[str]:
         notes.append(f"The fit FAILED: {cause}{reasons}. Do not use these values.")
     if cal.start_note:
         notes.append(cal.start_note)
+    if cal.nominal.coupling is not None:
+        coupled = "; ".join(cal.nominal.coupling.describe(cal.nominal.joint_types))
+        notes.append(
+            f"Joint values are the controller's {cal.nominal.dof}, coupled to the model's "
+            f"{cal.nominal.model_dof} ({coupled}); the fit ran in the model's joints and "
+            "the coupling is no parameter of it."
+        )
     if cal.nominal.sizes:
         notes.append(
             f"Sizes of a real deviation of {cal.nominal.name} (its own, not the industrial "

@@ -111,6 +111,11 @@ class Robot:
         deviation expected of it, and the standard error past which an estimate is poorly
         determined. Empty (the default): the industrial sizes. Set with `with_plausible`;
         they decide what identification holds, and are no part of the kinematics.
+    coupling : casecal.model.coupling.Coupling or None
+        The model's joint values from the controller's, ``q_model = M q + b``
+        (`with_coupling`); None: the controller's joints are the model's. With a coupling,
+        every joint value the API takes or returns is the controller's (`dof` of them),
+        and `limits` bound the controller joints (`casecal.model.coupling`).
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -134,6 +139,7 @@ class Robot:
     inputs: tuple = ()
     payload_com: tuple[float, float, float] = (0.0, 0.0, 0.0)
     sizes: tuple = ()
+    coupling: object = None
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
@@ -143,6 +149,8 @@ class Robot:
         object.__setattr__(self, "terms", tuple(self.terms))
         if self.sizes:
             object.__setattr__(self, "sizes", checked_sizes(self.sizes, f"robot {self.name!r}"))
+        if self.coupling is not None:
+            object.__setattr__(self, "coupling", _checked_coupling(self))
         check_terms(self)
         object.__setattr__(self, "terms", refreshed(self))
         if self.convention not in ("dh", "mdh", "urdf"):
@@ -186,8 +194,120 @@ class Robot:
 
     @property
     def dof(self) -> int:
-        """Number of joints."""
+        """Number of joints: the controller's (as many as the model's without a coupling)."""
+        return len(self.joints) if self.coupling is None else self.coupling.n_controller
+
+    @property
+    def model_dof(self) -> int:
+        """Number of the kinematic model's joints (`joints`)."""
         return len(self.joints)
+
+    @property
+    def controller_joints(self) -> tuple:
+        """Per controller joint, what it is: ``.type`` ("R" or "P") and ``.limits`` (rad or
+        m, None when none are given). Without a coupling, the `joints` themselves."""
+        if self.coupling is None:
+            return self.joints
+        from .coupling import ControllerJoint, controller_type
+
+        c = self.coupling
+        limits = [j.limits for j in self.joints] if c.square else list(c.limits)
+        types = self.joint_types
+        return tuple(
+            ControllerJoint(controller_type(c.M, types, k), limits[k])
+            for k in range(c.n_controller)
+        )
+
+    @property
+    def controller_types(self) -> str:
+        """One letter per controller joint, e.g. ``"RRPR"`` (`joint_types` without a
+        coupling)."""
+        return "".join(j.type for j in self.controller_joints)
+
+    def model_joints(self, q) -> np.ndarray:
+        """The kinematic model's joint values at controller joint values `q`.
+
+        Parameters
+        ----------
+        q : array-like, shape (dof,) or (N, dof)
+            Controller joint values, rad (R) or m (P); per-pose inputs may follow the
+            joints.
+
+        Returns
+        -------
+        ndarray, shape (model_dof,) or (N, model_dof) (inputs passed through)
+            ``q @ M.T + b`` (`coupling`); `q` itself, as an array, without a coupling.
+        """
+        q2, single = check_joint_values(q, self.dof, len(self.inputs))
+        if self.coupling is not None:
+            q2 = self.coupling.model(q2)
+        return q2[0] if single else q2
+
+    def uncoupled(self) -> Robot:
+        """The kinematic model alone: this robot without its coupling, taking model joint
+        values. Its joints' limits are the ranges the controller joints' limits map them
+        into (`casecal.model.coupling.hull`), for sampling poses of the model. Itself when
+        there is no coupling."""
+        if self.coupling is None:
+            return self
+        from .coupling import hull
+
+        ranges = hull(self.coupling, self.limits)
+        joints = tuple(
+            dataclasses.replace(j, limits=r) for j, r in zip(self.joints, ranges, strict=True)
+        )
+        return dataclasses.replace(self, joints=joints, coupling=None, auto_beta=False)
+
+    def recoupled(self, like: Robot) -> Robot:
+        """This robot (a model `uncoupled` from `like`, e.g. calibrated) with `like`'s
+        coupling and joint limits back; itself when `like` has no coupling."""
+        if like.coupling is None:
+            return self
+        joints = tuple(
+            dataclasses.replace(j, limits=o.limits)
+            for j, o in zip(self.joints, like.joints, strict=True)
+        )
+        return dataclasses.replace(self, joints=joints, coupling=like.coupling, auto_beta=False)
+
+    def with_coupling(self, M, b=None, limits=None) -> Robot:
+        """A new Robot whose model joints follow the controller's: ``q_model = M q + b``.
+
+        Parameters
+        ----------
+        M : array-like, shape (model_dof, n_controller)
+            One row per model joint (`joints`), one column per controller joint (the
+            joint values the API then takes, the CSV's ``q1`` … ``qn``); dimensionless (a
+            controller joint drives model joints of its own type).
+        b : array-like, shape (model_dof,), optional
+            Constant offsets, rad (revolute model joint) or m (prismatic). Default 0.
+        limits : sequence of (float, float) or None, optional
+            Only with fewer controller joints than model joints: per controller joint its
+            [min, max] (rad or m) or None (a revolute joint without limits). With as many,
+            the joint rows' limits bound the controller joints, row i joint i.
+
+        Returns
+        -------
+        Robot
+            With the identity (and no offset), this robot without a coupling.
+
+        Raises
+        ------
+        CalibrationError
+            A matrix of the wrong shape or not finite, a controller joint driving nothing
+            or both revolute and prismatic joints, controller joints that move the model
+            alike, limits in the wrong place (`casecal.model.coupling.make_coupling`).
+
+        Examples
+        --------
+        A parallelogram arm whose model joint 3 turns by -(J2 + J3):
+
+        >>> M = np.eye(6); M[2, 1] = M[2, 2] = -1.0  # doctest: +SKIP
+        >>> arm = load_robot("kr16_2").with_coupling(M)  # doctest: +SKIP
+        """
+        from .coupling import make_coupling
+
+        coupling = make_coupling(M, b, limits, self.joints, f"robot {self.name!r}")
+        return dataclasses.replace(self, coupling=coupling, auto_beta=False)
 
     @property
     def n_inputs(self) -> int:
@@ -336,7 +456,7 @@ class Robot:
             For a prismatic joint without limits (there is no sensible default stroke).
         """
         rows = []
-        for i, j in enumerate(self.joints, start=1):
+        for i, j in enumerate(self.controller_joints, start=1):
             if j.limits is not None:
                 rows.append(j.limits)
             elif j.type == "R":
@@ -356,6 +476,8 @@ class Robot:
         tool and reflector offsets: no pose of the arm puts a point farther out. None for
         a prismatic joint without limits.
         """
+        if self.coupling is not None:  # the model's joints over the controller's ranges
+            return self.uncoupled().reach
         total = float(np.linalg.norm(self.tool.xyz))
         total += max((float(np.linalg.norm(p)) for p in self.points), default=0.0)
         for j in self.joints:
@@ -506,6 +628,8 @@ class Robot:
         origin is the one point (m = 1).
         """
         q2, single = check_joint_values(q, self.dof, len(self.inputs))
+        if self.coupling is not None:
+            q2 = self.coupling.model(q2)
         ch = kinematics.chain(self.structure)
         out = ch.evaluate("points", q2, self.vector()).reshape(q2.shape[0], -1, 3)
         return out[0] if single else out
@@ -559,6 +683,8 @@ class Robot:
 
     def _evaluate(self, kind: str, q, names: Sequence[str] = (), deviations=False) -> np.ndarray:
         q2, single = check_joint_values(q, self.dof, len(self.inputs))
+        if self.coupling is not None:
+            q2 = self.coupling.model(q2)
         ch = kinematics.chain(self.structure)
         p = self.vector()
         columns = ch.columns(names) if names else ()
@@ -567,6 +693,20 @@ class Robot:
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, {self.joint_types}, convention={self.convention!r})"
+
+
+def _checked_coupling(robot: Robot):
+    """`robot.coupling` checked against its joints (`casecal.model.coupling.make_coupling`)."""
+    from .coupling import Coupling, make_coupling
+
+    c = robot.coupling
+    label = f"robot {robot.name!r}"
+    if not isinstance(c, Coupling):
+        raise CalibrationError(
+            f"{label}: coupling must be a casecal.model.coupling.Coupling; use "
+            "Robot.with_coupling(M, b)"
+        )
+    return make_coupling(c.matrix, c.offset, c.limits, tuple(robot.joints), label)
 
 
 def _points(name: str, points) -> tuple[tuple[float, float, float], ...]:
