@@ -475,10 +475,11 @@ def _cmd_show(args: argparse.Namespace) -> None:
     deg, mm = 180.0 / math.pi, 1e3
     if robot.convention == "urdf":
         _show_urdf(robot, deg, mm)
+        _show_coupling(robot, deg, mm)
         return
     conv = "standard DH" if robot.convention == "dh" else "modified DH (Craig)"
     print(f"{robot.name}: {robot.full_name or robot.name}")
-    joints = "1 joint" if robot.dof == 1 else f"{robot.dof} joints"
+    joints = "1 joint" if robot.model_dof == 1 else f"{robot.model_dof} joints"
     print(f"{joints} ({robot.joint_types}), {conv}; lengths in mm, angles in degrees")
     print()
     print(
@@ -516,6 +517,29 @@ def _cmd_show(args: argparse.Namespace) -> None:
             print(f"  - {s}")
     if robot.confidence:
         print(f"confidence: {robot.confidence}")
+    _show_coupling(robot, deg, mm)
+
+
+def _show_coupling(robot, deg: float, mm: float) -> None:
+    """The joint coupling, if any: which joint values the robot takes."""
+    c = robot.coupling
+    if c is None:
+        return
+    print(
+        f"joint coupling: the controller's {robot.dof} joints (CSV q1 … q{robot.dof}) drive "
+        f"the model's {robot.model_dof}:"
+    )
+    for line in c.describe(robot.joint_types):
+        print(f"  {line}")
+    if c.square:
+        print("  (q min / q max above bound the controller joints)")
+        return
+    for k, j in enumerate(robot.controller_joints, start=1):
+        scale, u = (deg, "deg") if j.type == "R" else (mm, "mm")
+        lim = "none"
+        if j.limits is not None:
+            lim = f"{j.limits[0] * scale:.4f} … {j.limits[1] * scale:.4f} {u}"
+        print(f"  controller q{k} ({j.type}) limits: {lim}")
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):

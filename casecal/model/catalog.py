@@ -35,6 +35,15 @@ say)::
     [plausible.poorly]         # optional: standard errors above these are poorly determined
     length_mm = 4.0            # default: the plausible size times the default's ratio
     angle_deg = 0.4            # (1 mm / 2.5 mm = 0.4 for lengths, 0.1° / 0.5° = 0.2 for angles)
+
+An optional ``[coupling]`` table gives the model's joints from the controller's (the CSV's
+``q1`` … ``qn``), ``q_model = M q + b`` (`casecal.model.coupling`, `Robot.with_coupling`)::
+
+    [coupling]
+    q3 = {q2 = -1.0, q3 = -1.0}  # model joint 3 = -(controller joints 2 and 3); others: own
+    # controller_joints = 3      # fewer controller joints than model joints (default: as
+    # limits = [[-45.0, 45.0], [-30.0, 30.0], []]  # many), then their limits here ([]: none)
+    # q4 = {q2 = -1.0, q3 = -1.0, offset = 5.0}   # offset in angle_unit (length_unit: P)
 Every mistake raises `CalibrationError` naming the file, the key and the fix.
 """
 
@@ -71,6 +80,7 @@ _TOP_KEYS = TOP_KEYS | {
     "confidence",
     "description",
     "plausible",
+    "coupling",
 }
 _JOINT_KEYS = {"type", "a", "alpha", "d", "theta", "beta", "limits"}
 _FRAME_KEYS = {"xyz", "rpy"}
@@ -259,7 +269,87 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
     )
     robot = add_terms(robot, data, angle, label, _number, length)
     sizes = _sizes(data, label)
-    return dataclasses.replace(robot, sizes=sizes, auto_beta=False) if sizes else robot
+    robot = dataclasses.replace(robot, sizes=sizes, auto_beta=False) if sizes else robot
+    if "coupling" in data:
+        robot = _coupling(robot, data["coupling"], length, angle, label)
+    return robot
+
+
+def _coupling(robot: Robot, table, length: float, angle: float, label: str) -> Robot:
+    """`robot` with the ``[coupling]`` table of its file (module doc)."""
+    import numpy as np
+
+    if not isinstance(table, dict):
+        raise CalibrationError(
+            f"{label}: coupling must be a table, e.g. [coupling] with q3 = {{q2 = -1.0, q3 = -1.0}}"
+        )
+    n, types = robot.model_dof, robot.joint_types
+    k = table.get("controller_joints", n)
+    if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= n:
+        raise CalibrationError(
+            f"{label}: coupling.controller_joints = {k!r}; give a whole number from 1 to the "
+            f"model's {n} joints"
+        )
+    rows = [f"q{i}" for i in range(1, n + 1)]
+    unknown = sorted(set(table) - {"controller_joints", "limits", *rows})
+    if unknown:
+        raise CalibrationError(
+            f"{label}: unknown key '{unknown[0]}' at [coupling]; allowed keys: "
+            f"controller_joints, limits, q1 … q{n} (model joints)"
+        )
+    M, b = np.zeros((n, k)), np.zeros(n)
+    columns = {f"q{j}": j - 1 for j in range(1, k + 1)}
+    for i, key in enumerate(rows):
+        if key not in table:
+            if i >= k:
+                raise CalibrationError(
+                    f"{label}: [coupling] does not give model joint {key}, and there is no "
+                    f"controller joint {key} (controller_joints = {k}); add {key} = {{...}}"
+                )
+            M[i, i] = 1.0
+            continue
+        row = table[key]
+        if not isinstance(row, dict):
+            raise CalibrationError(
+                f"{label}: coupling.{key} must be an inline table of controller joints, "
+                f"e.g. {key} = {{q2 = -1.0, q3 = -1.0, offset = 0.0}}"
+            )
+        for name, value in row.items():
+            if name == "offset":
+                scale = angle if types[i] == "R" else length
+                b[i] = _number(value, label, f"coupling.{key}.offset") * scale
+            elif name in columns:
+                M[i, columns[name]] = _number(value, label, f"coupling.{key}.{name}")
+            else:
+                raise CalibrationError(
+                    f"{label}: coupling.{key} names {name!r}, which is no controller joint "
+                    f"(q1 … q{k}) nor offset"
+                )
+    limits = None
+    if "limits" in table:
+        lim = table["limits"]
+        if not isinstance(lim, list) or len(lim) != k:
+            raise CalibrationError(
+                f"{label}: coupling.limits must give one [min, max] (or [] for none) per "
+                f"controller joint ({k})"
+            )
+        limits = []
+        for c, pair in enumerate(lim):
+            driven = np.flatnonzero(M[:, c])
+            scale = angle if not driven.size or types[driven[0]] == "R" else length
+            if pair == []:
+                limits.append(None)
+            elif isinstance(pair, list) and len(pair) == 2:
+                where = f"coupling.limits[{c + 1}]"
+                limits.append(tuple(_number(v, label, where) * scale for v in pair))
+            else:
+                raise CalibrationError(
+                    f"{label}: coupling.limits[{c + 1}] must be [min, max] or [] (no limits)"
+                )
+    try:
+        return robot.with_coupling(M, b, limits)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{label}: [coupling]: {exc}") from None
 
 
 _SIZE_KEYS = {

@@ -38,6 +38,15 @@ def export(robot, path) -> Export:
         text, notes = robot_to_toml(robot), []
         contract = Contract("a TOML robot file", robot, robot, read)
     elif suffix in (".urdf", ".yaml", ".yml"):
+        if robot.coupling is not None:
+            what = "a URDF" if suffix == ".urdf" else "a UR kinematics file"
+            raise CalibrationError(
+                f"{path}: robot {robot.name!r} couples its joints "
+                f"({'; '.join(robot.coupling.describe(robot.joint_types))}, from the "
+                f"controller's joints): {what} cannot hold that, and without it the file "
+                "would take the controller's joint values for the model's; not written: save "
+                "as .toml, which keeps the coupling"
+            )
         if suffix == ".urdf":
             from .urdf_out import robot_to_urdf as writer
             from .urdf_out import urdf_contract as contract_of
