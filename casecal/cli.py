@@ -103,8 +103,19 @@ def parse_angle(text: str) -> float:
     return value
 
 
+def _with_sizes(robot, args: argparse.Namespace):
+    """`robot` with --plausible-length-mm and --plausible-angle-deg, over its file's."""
+    length, angle = args.plausible_length_mm, args.plausible_angle_deg
+    if length is None and angle is None:
+        return robot
+    return robot.with_plausible(
+        length=None if length is None else length * 1e-3,
+        angle=None if angle is None else math.radians(angle),
+    )
+
+
 def _cmd_identify(args: argparse.Namespace) -> None:
-    robot = robot_for(args, args.robot)
+    robot = _with_sizes(robot_for(args, args.robot), args)
     if args.pairs:
         unsupported = [
             flag
@@ -323,7 +334,7 @@ def _deviations_text(cal, path: str) -> str:
 def _cmd_calibrate_until(args: argparse.Namespace) -> None:
     from .design.campaign import calibrate_until, pool_measure
 
-    robot = robot_for(args, args.robot)
+    robot = _with_sizes(robot_for(args, args.robot), args)
     pool = read_csv(args.pool, robot)
     if args.output:
         _check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
@@ -474,10 +485,11 @@ def _cmd_show(args: argparse.Namespace) -> None:
     deg, mm = 180.0 / math.pi, 1e3
     if robot.convention == "urdf":
         _show_urdf(robot, deg, mm)
+        _show_coupling(robot, deg, mm)
         return
     conv = "standard DH" if robot.convention == "dh" else "modified DH (Craig)"
     print(f"{robot.name}: {robot.full_name or robot.name}")
-    joints = "1 joint" if robot.dof == 1 else f"{robot.dof} joints"
+    joints = "1 joint" if robot.model_dof == 1 else f"{robot.model_dof} joints"
     print(f"{joints} ({robot.joint_types}), {conv}; lengths in mm, angles in degrees")
     print()
     print(
@@ -515,6 +527,29 @@ def _cmd_show(args: argparse.Namespace) -> None:
             print(f"  - {s}")
     if robot.confidence:
         print(f"confidence: {robot.confidence}")
+    _show_coupling(robot, deg, mm)
+
+
+def _show_coupling(robot, deg: float, mm: float) -> None:
+    """The joint coupling, if any: which joint values the robot takes."""
+    c = robot.coupling
+    if c is None:
+        return
+    print(
+        f"joint coupling: the controller's {robot.dof} joints (CSV q1 … q{robot.dof}) drive "
+        f"the model's {robot.model_dof}:"
+    )
+    for line in c.describe(robot.joint_types):
+        print(f"  {line}")
+    if c.square:
+        print("  (q min / q max above bound the controller joints)")
+        return
+    for k, j in enumerate(robot.controller_joints, start=1):
+        scale, u = (deg, "deg") if j.type == "R" else (mm, "mm")
+        lim = "none"
+        if j.limits is not None:
+            lim = f"{j.limits[0] * scale:.4f} … {j.limits[1] * scale:.4f} {u}"
+        print(f"  controller q{k} ({j.type}) limits: {lim}")
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -607,6 +642,23 @@ def build_parser() -> argparse.ArgumentParser:
             default=0,
             help="random seed for uniform poses and noise (default 0)",
         )
+
+    def add_sizes(p):
+        for flag, what, ratio, default in (
+            ("--plausible-length-mm", "lengths, mm", "0.4", "2.5"),
+            ("--plausible-angle-deg", "angles, degrees", "0.2", "0.5"),
+        ):
+            p.add_argument(
+                flag,
+                type=cli_args.size,
+                default=None,
+                metavar="SIZE",
+                help=f"the largest deviation expected of the robot's {what}: a parameter "
+                "whose standard error exceeds it (while it moves the points by less than the "
+                f"noise) is held, and an estimate whose standard error exceeds {ratio} of it "
+                "is poorly determined (not written) (default: the robot file's [plausible], "
+                f"else {default})",
+            )
 
     robot_out_help = (
         "write the calibrated robot here: .toml, .urdf (a URDF robot's own file with the "
@@ -729,6 +781,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="fail (exit 2, nothing written) if any asked-for parameter cannot be identified, "
         "instead of holding it at nominal and saying so",
     )
+    add_sizes(p)
     p.add_argument("-o", "--output", metavar="FILE", help=robot_out_help)
     p.set_defaults(func=_cmd_identify)
 
@@ -767,6 +820,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="how to choose the next poses (default optimal)",
     )
     p.add_argument("--parameters", default=None, help=params_help)
+    add_sizes(p)
     p.add_argument("-o", "--output", metavar="FILE", help=robot_out_help)
     p.set_defaults(func=_cmd_calibrate_until)
 

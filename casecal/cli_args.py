@@ -34,6 +34,20 @@ def workers(text: str) -> int:
     return value
 
 
+def size(text: str) -> float:
+    """A plausible deviation in the flag's unit: a positive finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a size: give a positive number in the flag's unit "
+            "(e.g. --plausible-length-mm 10 --plausible-angle-deg 2)"
+        )
+    return value
+
+
 def scheduler(text: str) -> str:
     """A dask scheduler address, [tcp://]host:port."""
     try:

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> None:
     orientation = False if args.position_only else None
     result = compensate(calibrated, q, nominal, frame=args.frame, orientation=orientation)
     columns = {}
-    for i, joint in enumerate(calibrated.joints, start=1):
+    for i, joint in enumerate(calibrated.controller_joints, start=1):
         scale, unit = (180 / np.pi, "deg") if joint.type == "R" else (1e3, "mm")
         columns[f"q{i}_{unit}"] = result.q[:, i - 1] * scale
     columns["ok"] = result.ok.astype(int)

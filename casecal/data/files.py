@@ -139,7 +139,7 @@ def _inputs(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
 
 
 def _warn_outside_limits(q: np.ndarray, robot: Robot, label: str) -> None:
-    for i, joint in enumerate(robot.joints):
+    for i, joint in enumerate(robot.controller_joints):
         if joint.limits is None:
             continue
         lo, hi = joint.limits
@@ -194,7 +194,7 @@ def _check_units(
         names = [c for c in df.columns if _POINT.match(c) or re.fullmatch(r"[xyz](_(mm|m|um))?", c)]
         unit = re.fullmatch(r"(?:p\d+_)?[xyz](?:_(mm|m|um))?", names[0]).group(1) or "m"
     shown = ", ".join(names) if len(names) <= 3 else f"{names[0]}, {names[1]}, … {names[-1]}"
-    revolute = [i for i, j in enumerate(robot.joints) if j.type == "R"]
+    revolute = [i for i, j in enumerate(robot.controller_joints) if j.type == "R"]
     in_degrees = [i for i in revolute if f"q{i + 1}_deg" in df]
     joints = in_degrees or revolute
     joint_names = [f"q{i + 1}_deg" if in_degrees else _joint_column(df, i) for i in joints]
@@ -301,7 +301,7 @@ def read_joints(df: pd.DataFrame, robot: Robot, label: str) -> np.ndarray:
     """The joint columns of `df` for `robot`, in SI, shape (N, dof); warns outside limits."""
     columns = list(df.columns)
     q = np.empty((len(df), robot.dof))
-    for i, joint in enumerate(robot.joints, start=1):
+    for i, joint in enumerate(robot.controller_joints, start=1):
         name, scale = _pick(df, label, [f"q{i}"], joint)
         q[:, i - 1] = _numbers(df, name, label) * scale
         if name in (f"q{i}", f"q{i}_rad", f"q{i}_m"):
@@ -349,7 +349,7 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
     rounding of the mm/deg conversion (~1e-16 relative).
     """
     data = {}
-    for i, joint in enumerate(robot.joints, start=1):
+    for i, joint in enumerate(robot.controller_joints, start=1):
         col = measurements.q[:, i - 1]
         if joint.type == "R":
             data[f"q{i}_deg"] = np.rad2deg(col)

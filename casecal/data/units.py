@@ -237,7 +237,7 @@ def check_joints(
         None when the declared reading is the only plausible one.
     """
     q, points = _subsample(q, points)
-    revolute = [i for i, j in enumerate(robot.joints) if j.type == "R"]
+    revolute = [i for i, j in enumerate(robot.controller_joints) if j.type == "R"]
     joints = revolute if joints is None else [i for i in joints if i in revolute]
     if not joints or points.shape[0] < MIN_POINTS:
         return None

@@ -52,7 +52,7 @@ def seed_schedule(robot: Robot, n: int) -> np.ndarray:
     n = _check_count(n)
     k = np.arange(n, dtype=float)
     q = np.empty((n, robot.dof))
-    for i, joint in enumerate(robot.joints):
+    for i, joint in enumerate(robot.controller_joints):
         if joint.type == "R":
             q[:, i] = np.deg2rad(k)
         else:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import CalibrationError
-from ..model.parameters import UNITS, select, unit
+from ..model.parameters import UNITS, facts_of, select, unit
 from ..model.robot import Robot, check_joint_values
 
 NULL_SHARE = 1e-6
@@ -445,7 +445,9 @@ REPRESENTED = 0.05
 named in their combinations; beyond it the held parameter is its own, unestimated effect."""
 
 
-def represent(J: np.ndarray, names, estimated, exclude=(), standard_errors=None) -> Representation:
+def represent(
+    J: np.ndarray, names, estimated, exclude=(), standard_errors=None, sizes=()
+) -> Representation:
     """Express each held parameter's column by the estimated ones (least squares).
 
     Parameters
@@ -460,9 +462,12 @@ def represent(J: np.ndarray, names, estimated, exclude=(), standard_errors=None)
         on the measured points is below it), unless `standard_errors` is given.
     standard_errors : dict of str to float, optional
         Of the estimates, SI. Then an `exclude`d parameter is named in an estimate's
-        combination where a plausible deviation of it (`UNITS`: 2.5 mm, 0.5°) moves that
-        estimate by more than its standard error: d3 held for the noise beside d2 makes
-        the d2 estimate d2 + d3, and stating it as d2 alone was off by 100 standard errors.
+        combination where a plausible deviation of it (`sizes`, by default `UNITS`: 2.5 mm,
+        0.5°) moves that estimate by more than its standard error: d3 held for the noise
+        beside d2 makes the d2 estimate d2 + d3, and stating it as d2 alone was off by 100
+        standard errors.
+    sizes : tuple of (str, float, float)
+        The robot's own plausible deviations (`casecal.Robot.sizes`); () for `UNITS`'.
     """
     names = list(names)
     if J.shape[0] > J.shape[1]:
@@ -474,7 +479,7 @@ def represent(J: np.ndarray, names, estimated, exclude=(), standard_errors=None)
     misfit: dict[str, float] = {}
     if standard_errors is not None and est:
         noisy = [i for i in range(len(names)) if i not in set(est) and names[i] in exclude]
-        _alias(J, names, est, noisy, standard_errors, terms)
+        _alias(J, names, est, noisy, standard_errors, terms, sizes)
     if not held:
         return Representation({k: tuple(v) for k, v in terms.items()}, misfit)
     B = J[:, est]
@@ -500,7 +505,7 @@ def represent(J: np.ndarray, names, estimated, exclude=(), standard_errors=None)
     return Representation({k: tuple(v) for k, v in terms.items()}, misfit)
 
 
-def _alias(J, names, est, noisy, standard_errors, terms) -> None:
+def _alias(J, names, est, noisy, standard_errors, terms, sizes=()) -> None:
     """Add to `terms` the parameters held for the noise that a plausible deviation of
     would move an estimate by more than its standard error (the least-squares alias
     ``(J_eᵀ J_e)⁻¹ J_eᵀ J_h``, exact for the linearised fit whatever J_e leaves of J_h)."""
@@ -511,7 +516,7 @@ def _alias(J, names, est, noisy, standard_errors, terms) -> None:
         if norms[h] == 0:
             continue
         coef = np.linalg.lstsq(B, J[:, h], rcond=None)[0] / b_norms
-        size = UNITS[unit(names[h])].plausible
+        size = facts_of(names[h], sizes).plausible
         for k, c in zip(est, coef, strict=True):
             if abs(c) * size > standard_errors.get(names[k], np.inf):
                 terms[names[k]].append((names[h], float(c)))

@@ -244,10 +244,13 @@ class Calibration:
 
     @property
     def poorly_determined(self) -> tuple[str, ...]:
-        """Estimated parameters whose standard error exceeds its unit's `poorly` bound
-        (`casecal.model.parameters.UNITS`: 1 mm, 0.1°)."""
+        """Estimated parameters whose standard error exceeds its unit's `poorly` bound:
+        the nominal robot's (`casecal.Robot.sizes`), by default
+        `casecal.model.parameters.UNITS`' (1 mm, 0.1°)."""
         return tuple(
-            n for n in self.estimated if not self.standard_errors[n] <= UNITS[unit(n)].poorly
+            n
+            for n in self.estimated
+            if not self.standard_errors[n] <= self.nominal.unit_facts(n).poorly
         )
 
     @property
@@ -328,7 +331,7 @@ class Calibration:
             else:
                 meaning = self.stands_for(name)
                 status = "identified" if meaning == name else f"stands for {meaning}"
-                if se > UNITS[unit(name)].poorly:
+                if se > self.nominal.unit_facts(name).poorly:
                     status = (
                         "poorly determined" if meaning == name else status + ", poorly determined"
                     )

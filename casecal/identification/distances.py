@@ -9,6 +9,7 @@ from one point to the other), not assumed.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -229,6 +230,17 @@ def identify_distances(
             f"poses have {measurements.q.shape[1]} joints; robot has {robot.dof}"
         )
     distances_at_the_door(robot, measurements.q, measurements.pairs, measurements.distances)
+    if robot.coupling is not None:  # the model alone, in its joints (`casecal.identify`)
+        model = dataclasses.replace(measurements, q=robot.model_joints(measurements.q))
+        cal = identify_distances(
+            robot.uncoupled(), model, parameters, method, max_iterations, tolerance, truth
+        )
+        return dataclasses.replace(
+            cal,
+            nominal=robot,
+            robot=cal.robot.recoupled(robot),
+            still_joints=still_joints(measurements.q, robot),
+        )
     known = bool(np.all(measurements.sigma > 0))
     w = 1.0 / measurements.sigma if known else np.ones(measurements.n_pairs)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)

@@ -56,7 +56,7 @@ def blind_only_here(problem: Problem, robot: Robot, estimated, held_for_noise) -
 def still_joints(q: np.ndarray, robot: Robot) -> tuple[str, ...]:
     """Joints that barely move in the data (`STILL`), e.g. ``("q5 = 0.000°",)``."""
     still = []
-    for i, kind in enumerate(robot.joint_types):
+    for i, kind in enumerate(robot.controller_types):  # the columns `q` has
         if np.ptp(q[:, i]) < STILL[kind]:
             value = np.degrees(q[0, i]) if kind == "R" else q[0, i] * 1e3
             still.append(f"q{i + 1} = {value:.3f}{'°' if kind == 'R' else ' mm'}")

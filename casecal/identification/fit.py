@@ -155,6 +155,24 @@ def identify(
     loss_scale = _check_options(method, bounds, prior, loss, loss_scale)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
+    if robot.coupling is not None:
+        return _coupled(
+            robot,
+            measurements,
+            parameters,
+            method,
+            noise=noise,
+            bounds=bounds or None,
+            prior=prior or None,
+            max_iterations=max_iterations,
+            tolerance=tolerance,
+            truth=truth,
+            orientation_sigma=orientation_sigma,
+            loss=loss,
+            loss_scale=loss_scale,
+            progress=progress,
+            per_session=per_session,
+        )
     sessions = resolve_sessions(robot, measurements, per_session)
     robot = session_robot(robot, sessions)  # a frame per session; itself for one session
     names = _selection(robot, parameters, sessions)
@@ -321,6 +339,25 @@ def _selection(robot: Robot, parameters, sessions) -> list[str]:
     return select(robot.parameter_names, [*names, *sessions.names()])
 
 
+def _coupled(robot: Robot, measurements: Measurements, *args, **options) -> Calibration:
+    """`identify` for a robot whose controller joints are coupled (`Robot.coupling`): the
+    kernels take the model's joints, so the controller's are mapped once, here, and the
+    model alone is fitted (the coupling is no parameter); the result has the coupled
+    robots back, and its joint words (`still_joints`) name the controller's joints."""
+    import dataclasses
+
+    from .evidence import still_joints
+
+    model = dataclasses.replace(measurements, q=robot.model_joints(measurements.q))
+    cal = identify(robot.uncoupled(), model, *args, **options)
+    return dataclasses.replace(
+        cal,
+        nominal=robot,
+        robot=cal.robot.recoupled(robot),
+        still_joints=still_joints(measurements.q, robot),
+    )
+
+
 SHARED_PROBLEMS = 3
 """Problems `_shared` keeps for reuse (they share one memo; each holds its weights)."""
 
@@ -361,7 +398,9 @@ def _representation(calibrated, final, frame, make_world, names, out, se):
     if out.end_analysis is out.start_analysis:  # one-shot: what it saw where it linearised
         final = make_world(frame.robot_out(out.start_robot), names=names)
     R = final.reduced(np.zeros(len(names))).R
-    return represent(R, names, out.estimated, out.pruned, standard_errors=se)
+    return represent(
+        R, names, out.estimated, out.pruned, standard_errors=se, sizes=calibrated.sizes
+    )
 
 
 def verdict(checks, solver_status: int, solver_message: str | None) -> tuple[int, str]:

@@ -16,7 +16,8 @@ error above `NEGLIGIBLE_SE` is held when
 
 - its spread exceeds the whole uncalibrated error: such an estimate could only make the
   robot worse where it was not measured (*too wide*); or
-- its standard error exceeds the plausible deviation of its unit (`UNITS`: 2.5 mm, 0.5°)
+- its standard error exceeds the plausible deviation of its unit (the robot's `sizes`;
+  by default `UNITS`: 2.5 mm, 0.5°)
   while its spread is below half the noise and its estimate is within `SIGNIFICANT`
   standard errors of its start: it changes nothing a measurement could see (*useless*).
   The bias holding it leaves is at most its spread, so a few such parameters together stay
@@ -38,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.parameters import UNITS, unit
+from ..model.parameters import facts_of
 from .linalg import Reduction, column_scales, nr_threshold
 
 NEGLIGIBLE_SE = 1e-9
@@ -51,7 +52,8 @@ candidates (Bonferroni: 4.2 for 43), so that of several loosely seen newcomers n
 kept by chance."""
 
 ALIAS = 20
-"""An estimate beyond this many plausible deviations (`UNITS`) whose standard error is already
+"""An estimate beyond this many plausible deviations (`UNITS`, or the robot's `sizes`) whose
+standard error is already
 implausible is an alias (a wrist angle turned half a turn, its tool offset flipped),
 not a deviation."""
 
@@ -151,7 +153,19 @@ class Reduced:
         return step, C
 
 
-def prune(linear, names, candidates, offsets, known, e0, J_work, noise, established, protected=()):
+def prune(
+    linear,
+    names,
+    candidates,
+    offsets,
+    known,
+    e0,
+    J_work,
+    noise,
+    established,
+    protected=(),
+    sizes=(),
+):
     """Which of the structurally identifiable `candidates` to hold (module doc).
 
     Parameters
@@ -175,6 +189,8 @@ def prune(linear, names, candidates, offsets, known, e0, J_work, noise, establis
         Candidates estimated in the round that just ended; the others are newcomers.
     protected : set of str
         Candidates never held as useless: held once, they turned out to matter.
+    sizes : tuple of (str, float, float)
+        The robot's own plausible deviations (`casecal.Robot.sizes`); () for `UNITS`'.
 
     Returns
     -------
@@ -190,7 +206,7 @@ def prune(linear, names, candidates, offsets, known, e0, J_work, noise, establis
         step, _ = reduced.fit(list(range(len(idx))))
         rest = reduced.rss_out + float(np.sum((reduced.Qtr - reduced.R @ step) ** 2))
         noise = float(np.sqrt(3 * rest / reduced.rows))
-    judge = _Judge(reduced, candidates, offsets, e0, J_work[:, idx], noise, established)
+    judge = _Judge(reduced, candidates, offsets, e0, J_work[:, idx], noise, established, sizes)
     judge.untried |= np.array([n in protected for n in candidates])
     keep, dropped = judge.hold([k for k, n in enumerate(candidates) if n in established])
     for k, name in enumerate(candidates):
@@ -213,12 +229,13 @@ def prune(linear, names, candidates, offsets, known, e0, J_work, noise, establis
 class _Judge:
     """Applies the two rules of the module doc to subsets of the candidates."""
 
-    def __init__(self, reduced, candidates, offsets, e0, W, noise, established):
+    def __init__(self, reduced, candidates, offsets, e0, W, noise, established, sizes=()):
         self.reduced, self.candidates, self.offsets = reduced, candidates, offsets
         self.e0, self.W, self.noise = e0, W, noise
         self.n_points = W.shape[0] / 3
         self.free = np.array([not n.startswith(UNPRUNED_PREFIXES) for n in candidates])
-        self.plausible = np.array([UNITS[unit(n)].plausible for n in candidates])
+        self.sizes = sizes
+        self.plausible = np.array([facts_of(n, sizes).plausible for n in candidates])
         # the 99.9 % level shared among the candidates (Bonferroni): of 18 loosely seen
         # harmonics, one 3.3 standard errors out happens by chance in one fit of 20
         from scipy.special import ndtri
@@ -266,7 +283,9 @@ class _Judge:
             pos = int(np.flatnonzero(bad)[-1])  # the latest goes first
             j = int(a[pos])
             name = self.candidates[subset[j]]
-            dropped[name] = _reason(name, se[pos], spread[pos], self.e0, bool(too_wide[pos]))
+            dropped[name] = _reason(
+                name, se[pos], spread[pos], self.e0, bool(too_wide[pos]), self.sizes
+            )
             c = C[:, j].copy()
             est = est - c / C[j, j] * est[j]  # the others, given this one at its start
             C = C - np.outer(c, c) / C[j, j]
@@ -274,8 +293,8 @@ class _Judge:
         return [subset[i] for i in active], dropped
 
 
-def _reason(name: str, se: float, spread: float, e0: float, too_wide: bool) -> str:
-    facts = UNITS[unit(name)]
+def _reason(name: str, se: float, spread: float, e0: float, too_wide: bool, sizes=()) -> str:
+    facts = facts_of(name, sizes)
     scale, u = facts.factor, "°" if facts.shown == "deg" else facts.shown
     text = f"its standard error would be {se * scale:.3g} {u}"
     if too_wide:
@@ -283,7 +302,7 @@ def _reason(name: str, se: float, spread: float, e0: float, too_wide: bool) -> s
             text + f", moving the tool by {spread * 1e3:.3g} mm RMS on poses across the "
             f"workspace, {WIDE} ({e0 * 1e3:.3g} mm)"
         )
-    limit = UNITS[unit(name)].plausible * scale
+    limit = facts.plausible * scale
     return (
         text + f", more than any real deviation ({limit:g} {u}), while it moves the tool by "
         f"only {spread * 1e3:.3g} mm RMS, below the noise"

@@ -187,6 +187,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
             noise,
             set(order),
             protected,
+            start.sizes,
         )
         pruned.update(dropped)
         seen.append(frozenset(order))

@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from ..model.parameters import poorly_text, sizes_text
 from .calibration import Calibration, Summary
 
 WIDTH = 96
@@ -161,6 +162,20 @@ def _notes(cal: Calibration) -> list[str]:
         notes.append(f"The fit FAILED: {cause}{reasons}. Do not use these values.")
     if cal.start_note:
         notes.append(cal.start_note)
+    if cal.nominal.coupling is not None:
+        coupled = "; ".join(cal.nominal.coupling.describe(cal.nominal.joint_types))
+        notes.append(
+            f"Joint values are the controller's {cal.nominal.dof}, coupled to the model's "
+            f"{cal.nominal.model_dof} ({coupled}); the fit ran in the model's joints and "
+            "the coupling is no parameter of it."
+        )
+    if cal.nominal.sizes:
+        notes.append(
+            f"Sizes of a real deviation of {cal.nominal.name} (its own, not the industrial "
+            f"defaults): {sizes_text(cal.nominal.sizes)}. A parameter whose standard error "
+            "exceeds its plausible deviation while it moves the measured points by less "
+            "than the noise is held."
+        )
     if cal.joined:
         one = len(cal.joined) == 1
         notes.append(
@@ -178,8 +193,9 @@ def _notes(cal: Calibration) -> list[str]:
         shown = ", ".join(f"{n} ± {_se_text(n, cal.standard_errors[n])}" for n in poor[:6]) + (
             " …" if len(poor) > 6 else ""
         )
+        bound = poorly_text(cal.nominal.sizes)
         notes.append(
-            f"{len(poor)} estimates are poorly determined (standard error above 1 mm or 0.1°): "
+            f"{len(poor)} estimates are poorly determined (standard error above {bound}): "
             f"{shown}. The poses barely constrain them and noise is amplified along them; "
             "do not use them without more or better-spread poses."
         )

@@ -1,9 +1,10 @@
 """What may be written: a calibration without the estimates it calls poorly determined.
 
-An estimate whose standard error exceeds its unit's `poorly` bound (1 mm, 0.1°) is noise
-amplified along a direction the poses barely see: the Scorbot's θ5 at the paper's
-schedule is 0.75° ± 18.6° where the truth is 0. The fit may pass its audit with it (the
-measured points do not care), but a controller given that value turns a joint by it.
+An estimate whose standard error exceeds its unit's `poorly` bound (the robot's `sizes`; by
+default 1 mm, 0.1°) is noise amplified along a direction the poses barely see: the
+Scorbot's θ5 at the paper's schedule is 0.75° ± 18.6° where the truth is 0. The fit may
+pass its audit with it (the measured points do not care), but a controller given that
+value turns a joint by it.
 Before a calibrated robot is written, such estimates are held at nominal and the rest
 refitted; the refit's own audit (its "parameters not asked for do not matter" check sees
 the held ones) says whether the data needed them.

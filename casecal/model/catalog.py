@@ -23,11 +23,33 @@ A robot file is TOML::
 ``points = [[x, y, z], …]`` (top level, length_unit) lists measured points (reflectors) in the
 tool frame; without it the tool frame's origin is the measured point. ``full_name``,
 ``variant``, ``source`` (list of strings) and ``confidence`` are optional descriptions.
+
+An optional ``[plausible]`` table gives the robot's own sizes of a real deviation
+(`Robot.with_plausible`), each key naming its unit (whatever length_unit and angle_unit
+say)::
+
+    [plausible]                # the largest deviations expected of this robot
+    length_mm = 10.0           # or length_m; default 2.5 mm
+    angle_deg = 2.0            # or angle_rad; default 0.5°
+    "rad/(N·m)" = 1e-4         # other units by name (casecal.model.parameters.UNITS), SI
+    [plausible.poorly]         # optional: standard errors above these are poorly determined
+    length_mm = 4.0            # default: the plausible size times the default's ratio
+    angle_deg = 0.4            # (1 mm / 2.5 mm = 0.4 for lengths, 0.1° / 0.5° = 0.2 for angles)
+
+An optional ``[coupling]`` table gives the model's joints from the controller's (the CSV's
+``q1`` … ``qn``), ``q_model = M q + b`` (`casecal.model.coupling`, `Robot.with_coupling`)::
+
+    [coupling]
+    q3 = {q2 = -1.0, q3 = -1.0}  # model joint 3 = -(controller joints 2 and 3); others: own
+    # controller_joints = 3      # fewer controller joints than model joints (default: as
+    # limits = [[-45.0, 45.0], [-30.0, 30.0], []]  # many), then their limits here ([]: none)
+    # q4 = {q2 = -1.0, q3 = -1.0, offset = 5.0}   # offset in angle_unit (length_unit: P)
 Every mistake raises `CalibrationError` naming the file, the key and the fix.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from pathlib import Path
@@ -58,6 +80,8 @@ _TOP_KEYS = TOP_KEYS | {
     "confidence",
     "description",
     "tips",
+    "plausible",
+    "coupling",
 }
 _JOINT_KEYS = {"type", "a", "alpha", "d", "theta", "beta", "limits"}
 _FRAME_KEYS = {"xyz", "rpy"}
@@ -264,7 +288,148 @@ def robot_from_dict(data: dict, label: str = "robot", default_name: str = "robot
         parents=parents,
         tip_frames=tips,
     )
-    return add_terms(robot, data, angle, label, _number, length)
+    robot = add_terms(robot, data, angle, label, _number, length)
+    sizes = _sizes(data, label)
+    robot = dataclasses.replace(robot, sizes=sizes, auto_beta=False) if sizes else robot
+    if "coupling" in data:
+        robot = _coupling(robot, data["coupling"], length, angle, label)
+    return robot
+
+
+def _coupling(robot: Robot, table, length: float, angle: float, label: str) -> Robot:
+    """`robot` with the ``[coupling]`` table of its file (module doc)."""
+    import numpy as np
+
+    if not isinstance(table, dict):
+        raise CalibrationError(
+            f"{label}: coupling must be a table, e.g. [coupling] with q3 = {{q2 = -1.0, q3 = -1.0}}"
+        )
+    n, types = robot.model_dof, robot.joint_types
+    k = table.get("controller_joints", n)
+    if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= n:
+        raise CalibrationError(
+            f"{label}: coupling.controller_joints = {k!r}; give a whole number from 1 to the "
+            f"model's {n} joints"
+        )
+    rows = [f"q{i}" for i in range(1, n + 1)]
+    unknown = sorted(set(table) - {"controller_joints", "limits", *rows})
+    if unknown:
+        raise CalibrationError(
+            f"{label}: unknown key '{unknown[0]}' at [coupling]; allowed keys: "
+            f"controller_joints, limits, q1 … q{n} (model joints)"
+        )
+    M, b = np.zeros((n, k)), np.zeros(n)
+    columns = {f"q{j}": j - 1 for j in range(1, k + 1)}
+    for i, key in enumerate(rows):
+        if key not in table:
+            if i >= k:
+                raise CalibrationError(
+                    f"{label}: [coupling] does not give model joint {key}, and there is no "
+                    f"controller joint {key} (controller_joints = {k}); add {key} = {{...}}"
+                )
+            M[i, i] = 1.0
+            continue
+        row = table[key]
+        if not isinstance(row, dict):
+            raise CalibrationError(
+                f"{label}: coupling.{key} must be an inline table of controller joints, "
+                f"e.g. {key} = {{q2 = -1.0, q3 = -1.0, offset = 0.0}}"
+            )
+        for name, value in row.items():
+            if name == "offset":
+                scale = angle if types[i] == "R" else length
+                b[i] = _number(value, label, f"coupling.{key}.offset") * scale
+            elif name in columns:
+                M[i, columns[name]] = _number(value, label, f"coupling.{key}.{name}")
+            else:
+                raise CalibrationError(
+                    f"{label}: coupling.{key} names {name!r}, which is no controller joint "
+                    f"(q1 … q{k}) nor offset"
+                )
+    limits = None
+    if "limits" in table:
+        lim = table["limits"]
+        if not isinstance(lim, list) or len(lim) != k:
+            raise CalibrationError(
+                f"{label}: coupling.limits must give one [min, max] (or [] for none) per "
+                f"controller joint ({k})"
+            )
+        limits = []
+        for c, pair in enumerate(lim):
+            driven = np.flatnonzero(M[:, c])
+            scale = angle if not driven.size or types[driven[0]] == "R" else length
+            if pair == []:
+                limits.append(None)
+            elif isinstance(pair, list) and len(pair) == 2:
+                where = f"coupling.limits[{c + 1}]"
+                limits.append(tuple(_number(v, label, where) * scale for v in pair))
+            else:
+                raise CalibrationError(
+                    f"{label}: coupling.limits[{c + 1}] must be [min, max] or [] (no limits)"
+                )
+    try:
+        return robot.with_coupling(M, b, limits)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{label}: [coupling]: {exc}") from None
+
+
+_SIZE_KEYS = {
+    "length_m": ("m", 1.0),
+    "length_mm": ("m", 1e-3),
+    "angle_rad": ("rad", 1.0),
+    "angle_deg": ("rad", math.pi / 180.0),
+}
+"""Keys of a robot file's ``[plausible]`` table: unit and factor to SI (other units by
+their `casecal.model.parameters.UNITS` key, in SI)."""
+
+
+def _sizes(data: dict, label: str) -> tuple:
+    """The ``[plausible]`` table of a robot file as `Robot.sizes` (module doc)."""
+    from .parameters import UNITS, checked_sizes
+
+    table = data.get("plausible")
+    if table is None:
+        return ()
+    if not isinstance(table, dict):
+        raise CalibrationError(
+            f"{label}: plausible must be a table, e.g. [plausible] with length_mm = 10.0 and "
+            "angle_deg = 2.0"
+        )
+    poorly = table.get("poorly", {})
+    if not isinstance(poorly, dict):
+        raise CalibrationError(
+            f"{label}: plausible.poorly must be a table, e.g. [plausible.poorly] with "
+            "length_mm = 4.0"
+        )
+    plausible = _size_table({k: v for k, v in table.items() if k != "poorly"}, label, "plausible")
+    bounds = _size_table(poorly, label, "plausible.poorly")
+    triples = []
+    for si in sorted(set(plausible) | set(bounds)):
+        default = UNITS[si]
+        p = plausible.get(si, default.plausible)
+        q = bounds.get(si, p * default.poorly / default.plausible)
+        triples.append((si, p, q))
+    return checked_sizes(triples, label)
+
+
+def _size_table(table: dict, label: str, where: str) -> dict:
+    from .parameters import UNITS
+
+    out: dict[str, float] = {}
+    for key, value in table.items():
+        si, scale = _SIZE_KEYS.get(key, (key, 1.0))
+        if si not in UNITS:
+            raise CalibrationError(
+                f"{label}: unknown key '{key}' at [{where}]; allowed keys: "
+                f"{', '.join(_SIZE_KEYS)} or a unit by name ({', '.join(map(repr, UNITS))}, SI)"
+            )
+        if si in out:
+            raise CalibrationError(
+                f"{label}: [{where}] gives the size of {'lengths' if si == 'm' else 'angles'} "
+                "twice; keep one key"
+            )
+        out[si] = _number(value, label, f"{where}.{key}") * scale
+    return out
 
 
 def load_deviations(path, robot: Robot | None = None) -> dict[str, float]:

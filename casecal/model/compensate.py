@@ -241,7 +241,20 @@ def _nominal(calibrated: Robot, nominal: Robot | None) -> Robot:
         raise CalibrationError(
             f"the nominal robot has {nominal.dof} joints, the calibrated one {calibrated.dof}"
         )
+    if nominal.coupling != calibrated.coupling:
+        # the same joint values would mean other model joints to each: no target is shared
+        raise CalibrationError(
+            "the nominal and calibrated robots couple their joints differently "
+            f"({_coupling_words(nominal)} against {_coupling_words(calibrated)}); give the "
+            "nominal robot the calibrated one's coupling (Robot.with_coupling, [coupling])"
+        )
     return nominal
+
+
+def _coupling_words(robot: Robot) -> str:
+    if robot.coupling is None:
+        return "none"
+    return "; ".join(robot.coupling.describe(robot.joint_types)) or "identity"
 
 
 def _check_same_robot(frame: str, before: float, after: float) -> None:
@@ -266,8 +279,9 @@ def _judge(robot: Robot, q_t: np.ndarray, found, rows: slice) -> tuple[np.ndarra
     """Per row: usable, and if not, why (words and numbers)."""
     q = found.q
     # a joint without limits (continuous) turns freely: its default range is for sampling
-    lo = np.array([-np.inf if j.limits is None else j.limits[0] for j in robot.joints])
-    hi = np.array([np.inf if j.limits is None else j.limits[1] for j in robot.joints])
+    joints = robot.controller_joints  # what the controller is sent
+    lo = np.array([-np.inf if j.limits is None else j.limits[0] for j in joints])
+    hi = np.array([np.inf if j.limits is None else j.limits[1] for j in joints])
     outside = (q < lo - 1e-12) | (q > hi + 1e-12)
     too_far = found.amplification > AMPLIFICATION
     ok = (
@@ -309,7 +323,7 @@ def _judge(robot: Robot, q_t: np.ndarray, found, rows: slice) -> tuple[np.ndarra
 
 
 def _amount(robot: Robot, j: int, value: float) -> str:
-    if robot.joints[j].type == "R":
+    if robot.controller_joints[j].type == "R":
         return f"{np.rad2deg(value):.3g}°"
     return f"{value * 1e3:.4g} mm"
 
@@ -322,7 +336,7 @@ def _near_singular(robot: Robot, q: np.ndarray, dq: np.ndarray, difference: str)
         else ""
     )
     j = int(np.argmax(np.abs(dq)))
-    verb = "turn" if robot.joints[j].type == "R" else "move"
+    verb = "turn" if robot.controller_joints[j].type == "R" else "move"
     return (
         f"near a singularity{where}: the correction would {verb} joint {j + 1} by "
         f"{_amount(robot, j, dq[j])} for a pose difference of {difference}; a correction "

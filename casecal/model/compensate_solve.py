@@ -86,9 +86,12 @@ def _weights(rows: slice, length: float) -> np.ndarray:
 
 
 def joint_jacobian(robot: Robot, q: np.ndarray, rows: slice) -> np.ndarray:
-    """∂(position m, orientation rad)/∂q in the robot's world frame, (N, len(rows), dof)."""
+    """∂(position m, orientation rad)/∂q in the robot's world frame, (N, len(rows), dof);
+    q and the columns are the controller's joints (the model's Jacobian times the
+    coupling's M)."""
     chain = kinematics.chain(robot.structure)
-    return chain.evaluate("joint_jacobian", q, robot.vector())[:, rows, :]
+    J = chain.evaluate("joint_jacobian", robot.model_joints(q), robot.vector())[:, rows, :]
+    return J if robot.coupling is None else J @ robot.coupling.M
 
 
 def levers(J: np.ndarray, length: float) -> np.ndarray:
@@ -192,7 +195,10 @@ def solve(
 def aligned_axes(robot: Robot, q: np.ndarray) -> tuple[int, int, float] | None:
     """The two revolute joints whose axes most nearly coincide at pose `q` (dof,), as
     (i, j, angle rad), 1-based; None when no two axes are within 10° and 10 mm of a
-    common line (what a wrist singularity looks like)."""
+    common line (what a wrist singularity looks like), and for a coupled robot, whose
+    controller joints need not turn about one axis each."""
+    if robot.coupling is not None:
+        return None
     J = joint_jacobian(robot, q[None, :], slice(None))[0]
     p = robot.fk(q)[:3, 3]
     best = None

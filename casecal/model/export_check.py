@@ -134,7 +134,7 @@ def check_poses(robot, n: int = N_POSES, seed: int = 0) -> np.ndarray:
     Revolute joints without limits span ±π, prismatic ones ±1 m.
     """
     rows = []
-    for j in robot.joints:
+    for j in robot.controller_joints:  # the joints the robot takes (a coupling's controller's)
         if j.limits is not None:
             rows.append(j.limits)
         else:

@@ -31,6 +31,7 @@ Lengths are in metres and angles in radians everywhere inside casecal.
 
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
 import math
 import re
@@ -213,6 +214,155 @@ UNITS = {
     # a lumped gravity term: compliance times a weight (1e-6 rad/(N·m) · 1e3 N)
     "rad/m": Unit("mrad/m", 1e3, 1e-2, 1e-3, 1e-2),
 }
+
+SIZE_WORDS = {"length": "m", "angle": "rad"}
+"""Words for the SI units of geometry in `casecal.Robot.with_plausible` and robot files."""
+
+
+def unit_facts(si: str, sizes=()) -> Unit:
+    """`UNITS[si]` with a robot's own sizes in place of the defaults.
+
+    Parameters
+    ----------
+    si : str
+        A key of `UNITS` ("m", "rad", ...).
+    sizes : tuple of (str, float, float)
+        ``(unit, plausible, poorly)`` triples, SI (`casecal.Robot.sizes`); a unit not
+        listed keeps `UNITS`' sizes.
+    """
+    facts = UNITS[si]
+    for u, plausible, poorly in sizes:
+        if u == si:
+            return dataclasses.replace(facts, plausible=plausible, poorly=poorly)
+    return facts
+
+
+def facts_of(name: str, sizes=()) -> Unit:
+    """What casecal knows of parameter `name`'s unit (`unit`), with a robot's `sizes`
+    (`unit_facts`): its plausible deviation and the standard error past which its
+    estimate is poorly determined."""
+    return unit_facts(unit(name), sizes)
+
+
+def checked_sizes(sizes, label: str = "robot") -> tuple[tuple[str, float, float], ...]:
+    """`sizes` as `casecal.Robot.sizes` keeps them: ``(unit, plausible, poorly)`` triples
+    of known units with positive, finite SI values, one per unit, sorted by unit, and
+    without the triples that equal `UNITS`' defaults (a robot given the defaults is the
+    robot without sizes).
+
+    Raises
+    ------
+    CalibrationError
+        An unknown unit, a unit given twice, or a size that is not a positive finite number.
+    """
+    out: dict[str, tuple[float, float]] = {}
+    try:
+        triples = [tuple(t) for t in sizes]
+    except TypeError:
+        raise CalibrationError(
+            f"{label}: sizes must be (unit, plausible, poorly) triples, SI; "
+            "use Robot.with_plausible(length=..., angle=...)"
+        ) from None
+    for triple in triples:
+        if len(triple) != 3:
+            raise CalibrationError(
+                f"{label}: sizes entry {triple!r} is not a (unit, plausible, poorly) triple"
+            )
+        si, plausible, poorly = triple
+        if si not in UNITS:
+            raise CalibrationError(
+                f"{label}: plausible size for unit {si!r}: casecal knows no such unit; use "
+                f"length, angle or one of {', '.join(map(repr, UNITS))}"
+            )
+        if si in out:
+            raise CalibrationError(f"{label}: plausible size for unit {si!r} given twice")
+        values = []
+        for what, v in (("plausible deviation", plausible), ("poorly determined bound", poorly)):
+            number = isinstance(v, int | float) and not isinstance(v, bool)
+            shown = _size_text(si, v) if number else repr(v)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                raise CalibrationError(
+                    f"{label}: {what} of {_what(si)} is {shown}; give a positive finite number"
+                )
+            if not v > 0:
+                raise CalibrationError(
+                    f"{label}: {what} of {_what(si)} is {shown}; it must be positive "
+                    "(it is a size: the largest deviation expected, a standard error)"
+                )
+            values.append(float(v))
+        out[si] = (values[0], values[1])
+    return tuple(
+        (si, p, q)
+        for si, (p, q) in sorted(out.items())
+        # the defaults (to rounding: 0.5° · 0.2 is 0.1° to the last bit or two) are none
+        if not (
+            math.isclose(p, UNITS[si].plausible, rel_tol=1e-12)
+            and math.isclose(q, UNITS[si].poorly, rel_tol=1e-12)
+        )
+    )
+
+
+def sized(si: str, value, label: str = "robot") -> tuple[str, float, float]:
+    """One ``(unit, plausible, poorly)`` triple from `value`: a plausible deviation (SI),
+    whose poorly determined bound is then the default's in the same ratio (`UNITS`:
+    2.5 mm and 1 mm, so 10 mm gives 4 mm), or a ``(plausible, poorly)`` pair."""
+    if si not in UNITS:
+        raise CalibrationError(
+            f"{label}: plausible size for unit {si!r}: casecal knows no such unit; use "
+            f"length, angle or one of {', '.join(map(repr, UNITS))}"
+        )
+    if isinstance(value, tuple | list):
+        if len(value) != 2:
+            raise CalibrationError(
+                f"{label}: plausible size of {_what(si)}: give a number or a "
+                "(plausible, poorly) pair, SI"
+            )
+        return (si, value[0], value[1])
+    ratio = UNITS[si].poorly / UNITS[si].plausible
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return (si, value, value)  # checked_sizes says what is wrong
+    return (si, value, value * ratio)
+
+
+def _what(si: str) -> str:
+    words = {v: k for k, v in SIZE_WORDS.items()}
+    return f"{words[si]}s ({si})" if si in words else f"unit {si!r}"
+
+
+def _size_text(si: str, value: float) -> str:
+    facts = UNITS[si]
+    u = "°" if facts.shown == "deg" else " " + facts.shown
+    return f"{value * facts.factor:.3g}{u}"
+
+
+def sizes_text(sizes) -> str:
+    """The plausible deviations and poorly determined bounds of `sizes`, in words, e.g.
+    "plausible deviations 10 mm, 2° (default 2.5 mm, 0.5°); standard errors above 4 mm,
+    0.4° poorly determined (default 1 mm, 0.1°)"; "" for the defaults."""
+    if not sizes:
+        return ""
+    units = [si for si, _, _ in sizes]
+
+    def sizes_of(key) -> str:
+        return ", ".join(_size_text(si, key(unit_facts(si, sizes))) for si in units)
+
+    def defaults(key) -> str:
+        return ", ".join(_size_text(si, key(UNITS[si])) for si in units)
+
+    return (
+        f"plausible deviations {sizes_of(lambda f: f.plausible)} (default "
+        f"{defaults(lambda f: f.plausible)}); standard errors above "
+        f"{sizes_of(lambda f: f.poorly)} poorly determined (default "
+        f"{defaults(lambda f: f.poorly)})"
+    )
+
+
+def poorly_text(sizes=()) -> str:
+    """The poorly determined bounds of lengths and angles in words: "1 mm or 0.1°" by
+    default."""
+    return " or ".join(_size_text(si, unit_facts(si, sizes).poorly) for si in ("m", "rad"))
+
+
 _COMPLIANCE_RE = re.compile(r"^c\d+$")
 _LUMPED_RE = re.compile(r"^g\d+_\d+([mxyz])$")
 

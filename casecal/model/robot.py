@@ -135,6 +135,18 @@ class Robot:
         inputs (1 in its session's column, all 0 for the first session; a pose without
         them is the first session's); see `with_sessions` and `casecal.model.kinematics`.
         Empty by default: one session.
+    sizes : tuple of (str, float, float)
+        This robot's own sizes of a real deviation, ``(unit, plausible, poorly)`` per SI
+        unit ("m", "rad", …), in place of the industrial defaults of
+        `casecal.model.parameters.UNITS` (2.5 mm and 1 mm, 0.5° and 0.1°): the largest
+        deviation expected of it, and the standard error past which an estimate is poorly
+        determined. Empty (the default): the industrial sizes. Set with `with_plausible`;
+        they decide what identification holds, and are no part of the kinematics.
+    coupling : casecal.model.coupling.Coupling or None
+        The model's joint values from the controller's, ``q_model = M q + b``
+        (`with_coupling`); None: the controller's joints are the model's. With a coupling,
+        every joint value the API takes or returns is the controller's (`dof` of them),
+        and `limits` bound the controller joints (`casecal.model.coupling`).
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -160,9 +172,12 @@ class Robot:
     parents: tuple[int, ...] = ()
     tip_frames: tuple = ()
     sessions: tuple = ()
+    sizes: tuple = ()
+    coupling: object = None
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
+        from .parameters import checked_sizes
         from .terms import check_terms, refreshed
 
         if self.parents or self.tip_frames:
@@ -170,6 +185,10 @@ class Robot:
 
             check_tree(self)  # first: what a tree does not support is said as such
         object.__setattr__(self, "terms", tuple(self.terms))
+        if self.sizes:
+            object.__setattr__(self, "sizes", checked_sizes(self.sizes, f"robot {self.name!r}"))
+        if self.coupling is not None:
+            object.__setattr__(self, "coupling", _checked_coupling(self))
         check_terms(self)
         object.__setattr__(self, "terms", refreshed(self))
         object.__setattr__(self, "sessions", _sessions(self.name, self.sessions))
@@ -214,7 +233,12 @@ class Robot:
 
     @property
     def dof(self) -> int:
-        """Number of joints."""
+        """Number of joints: the controller's (as many as the model's without a coupling)."""
+        return len(self.joints) if self.coupling is None else self.coupling.n_controller
+
+    @property
+    def model_dof(self) -> int:
+        """Number of the kinematic model's joints (`joints`)."""
         return len(self.joints)
 
     @property
@@ -230,6 +254,113 @@ class Robot:
     def is_tree(self) -> bool:
         """Whether the robot is a kinematic tree (several tips, `casecal.model.tree`)."""
         return bool(self.tip_frames)
+
+    @property
+    def controller_joints(self) -> tuple:
+        """Per controller joint, what it is: ``.type`` ("R" or "P") and ``.limits`` (rad or
+        m, None when none are given). Without a coupling, the `joints` themselves."""
+        if self.coupling is None:
+            return self.joints
+        from .coupling import ControllerJoint, controller_type
+
+        c = self.coupling
+        limits = [j.limits for j in self.joints] if c.square else list(c.limits)
+        types = self.joint_types
+        return tuple(
+            ControllerJoint(controller_type(c.M, types, k), limits[k])
+            for k in range(c.n_controller)
+        )
+
+    @property
+    def controller_types(self) -> str:
+        """One letter per controller joint, e.g. ``"RRPR"`` (`joint_types` without a
+        coupling)."""
+        return "".join(j.type for j in self.controller_joints)
+
+    def model_joints(self, q) -> np.ndarray:
+        """The kinematic model's joint values at controller joint values `q`.
+
+        Parameters
+        ----------
+        q : array-like, shape (dof,) or (N, dof)
+            Controller joint values, rad (R) or m (P); per-pose inputs may follow the
+            joints.
+
+        Returns
+        -------
+        ndarray, shape (model_dof,) or (N, model_dof) (inputs passed through)
+            ``q @ M.T + b`` (`coupling`); `q` itself, as an array, without a coupling.
+        """
+        q2, single = check_joint_values(q, self.dof, len(self.inputs), len(self.sessions))
+        if self.coupling is not None:
+            q2 = self.coupling.model(q2)
+        return q2[0] if single else q2
+
+    def uncoupled(self) -> Robot:
+        """The kinematic model alone: this robot without its coupling, taking model joint
+        values. Its joints' limits are the ranges the controller joints' limits map them
+        into (`casecal.model.coupling.hull`), for sampling poses of the model. Itself when
+        there is no coupling."""
+        if self.coupling is None:
+            return self
+        from .coupling import hull
+
+        ranges = hull(self.coupling, self.limits)
+        joints = tuple(
+            dataclasses.replace(j, limits=r) for j, r in zip(self.joints, ranges, strict=True)
+        )
+        return dataclasses.replace(self, joints=joints, coupling=None, auto_beta=False)
+
+    def recoupled(self, like: Robot) -> Robot:
+        """This robot (a model `uncoupled` from `like`, e.g. calibrated) with `like`'s
+        coupling and joint limits back; itself when `like` has no coupling."""
+        if like.coupling is None:
+            return self
+        joints = tuple(
+            dataclasses.replace(j, limits=o.limits)
+            for j, o in zip(self.joints, like.joints, strict=True)
+        )
+        return dataclasses.replace(self, joints=joints, coupling=like.coupling, auto_beta=False)
+
+    def with_coupling(self, M, b=None, limits=None) -> Robot:
+        """A new Robot whose model joints follow the controller's: ``q_model = M q + b``.
+
+        Parameters
+        ----------
+        M : array-like, shape (model_dof, n_controller)
+            One row per model joint (`joints`), one column per controller joint (the
+            joint values the API then takes, the CSV's ``q1`` … ``qn``); dimensionless (a
+            controller joint drives model joints of its own type).
+        b : array-like, shape (model_dof,), optional
+            Constant offsets, rad (revolute model joint) or m (prismatic). Default 0.
+        limits : sequence of (float, float) or None, optional
+            Only with fewer controller joints than model joints: per controller joint its
+            [min, max] (rad or m) or None (a revolute joint without limits). With as many,
+            the joint rows' limits bound the controller joints, row i joint i.
+
+        Returns
+        -------
+        Robot
+            With the identity (and no offset), this robot without a coupling.
+
+        Raises
+        ------
+        CalibrationError
+            A matrix of the wrong shape or not finite, a controller joint driving nothing
+            or both revolute and prismatic joints, controller joints that move the model
+            alike, limits in the wrong place (`casecal.model.coupling.make_coupling`).
+
+        Examples
+        --------
+        A parallelogram arm whose model joint 3 turns by -(J2 + J3):
+
+        >>> M = np.eye(6); M[2, 1] = M[2, 2] = -1.0  # doctest: +SKIP
+        >>> arm = load_robot("kr16_2").with_coupling(M)  # doctest: +SKIP
+        """
+        from .coupling import make_coupling
+
+        coupling = make_coupling(M, b, limits, self.joints, f"robot {self.name!r}")
+        return dataclasses.replace(self, coupling=coupling, auto_beta=False)
 
     @property
     def n_inputs(self) -> int:
@@ -273,6 +404,73 @@ class Robot:
         if not self.sessions:
             return ()
         return ("base", "tool") if self.sessions[0].tool is not None else ("base",)
+
+    def with_plausible(
+        self, length: float | None = None, angle: float | None = None, **by_unit
+    ) -> Robot:
+        """A new Robot with its own sizes of a real deviation (`sizes`), SI.
+
+        Identification holds a parameter whose standard error exceeds its unit's plausible
+        deviation (and whose effect is below the noise), and calls an estimate whose
+        standard error exceeds the poorly determined bound poorly determined (the
+        command's ``identify -o`` does not write those). The industrial defaults
+        (`casecal.model.parameters.UNITS`: 2.5 mm, 0.5°) suit a calibrated-class arm; a
+        robot whose links are off by centimetres (a humanoid measured by motion capture)
+        needs its own, or its fits hold at their start what the data do see.
+
+        Parameters
+        ----------
+        length : float or (float, float), optional
+            The plausible deviation of lengths, m; alone, the poorly determined bound is
+            the default's in the same ratio (0.4: 10 mm gives 4 mm); a pair gives
+            ``(plausible, poorly)``. None: unchanged.
+        angle : float or (float, float), optional
+            The same for angles, rad (ratio 0.2: 2° gives 0.4°).
+        **by_unit : float or (float, float)
+            Other units by their key in `UNITS`, e.g. ``**{"rad/(N·m)": 1e-4}``.
+
+        Returns
+        -------
+        Robot
+            Sizes given replace this robot's, the others kept; a unit given its default
+            sizes has none of its own again (``robot.with_plausible(length=2.5e-3,
+            angle=math.radians(0.5))`` is the robot without sizes).
+
+        Raises
+        ------
+        CalibrationError
+            A unit casecal does not know, or a size that is not a positive finite number.
+
+        Examples
+        --------
+        >>> humanoid = robot.with_plausible(length=0.01, angle=math.radians(2))  # doctest: +SKIP
+        """
+        from .parameters import SIZE_WORDS, checked_sizes, sized
+
+        label = f"robot {self.name!r}"
+        given = dict(by_unit)
+        for word, value in (("length", length), ("angle", angle)):
+            if value is not None:
+                if SIZE_WORDS[word] in given:
+                    raise CalibrationError(
+                        f"{label}: {word} and {SIZE_WORDS[word]!r} both give the size of "
+                        f"unit {SIZE_WORDS[word]!r}; give one"
+                    )
+                given[SIZE_WORDS[word]] = value
+        kept = {si: (p, q) for si, p, q in self.sizes}
+        for si, value in given.items():
+            _, p, q = sized(si, value, label)
+            kept[si] = (p, q)
+        sizes = checked_sizes([(si, p, q) for si, (p, q) in kept.items()], label)
+        return dataclasses.replace(self, sizes=sizes, auto_beta=False)
+
+    def unit_facts(self, name: str):
+        """What this robot takes a real deviation of parameter `name` to be: its unit's
+        `casecal.model.parameters.Unit` with this robot's `sizes` (``.plausible``,
+        ``.poorly``, SI)."""
+        from .parameters import facts_of
+
+        return facts_of(name, self.sizes)
 
     @property
     def joint_types(self) -> str:
@@ -369,7 +567,7 @@ class Robot:
             For a prismatic joint without limits (there is no sensible default stroke).
         """
         rows = []
-        for i, j in enumerate(self.joints, start=1):
+        for i, j in enumerate(self.controller_joints, start=1):
             if j.limits is not None:
                 rows.append(j.limits)
             elif j.type == "R":
@@ -390,6 +588,8 @@ class Robot:
         a prismatic joint without limits. A tree's: every joint's (a bound for each
         branch) and its farthest tip's offset.
         """
+        if self.coupling is not None:  # the model's joints over the controller's ranges
+            return self.uncoupled().reach
         total = float(np.linalg.norm(self.tool.xyz))
         total += max((float(np.linalg.norm(t.xyz)) for t in self.tip_frames), default=0.0)
         total += max((float(np.linalg.norm(p)) for p in self.points), default=0.0)
@@ -567,6 +767,8 @@ class Robot:
         origin is the one point (m = 1).
         """
         q2, single = check_joint_values(q, self.dof, len(self.inputs), len(self.sessions))
+        if self.coupling is not None:
+            q2 = self.coupling.model(q2)
         ch = kinematics.chain(self.structure)
         out = ch.evaluate("points", q2, self.vector()).reshape(q2.shape[0], -1, 3)
         return out[0] if single else out
@@ -622,6 +824,8 @@ class Robot:
 
     def _evaluate(self, kind: str, q, names: Sequence[str] = (), deviations=False) -> np.ndarray:
         q2, single = check_joint_values(q, self.dof, len(self.inputs), len(self.sessions))
+        if self.coupling is not None:
+            q2 = self.coupling.model(q2)
         ch = kinematics.chain(self.structure)
         p = self.vector()
         columns = ch.columns(names) if names else ()
@@ -648,6 +852,20 @@ def _sessions(name: str, sessions) -> tuple[Session, ...]:
             f"robot {name!r}: give every session its own tool frame, or none of them"
         )
     return sessions
+
+
+def _checked_coupling(robot: Robot):
+    """`robot.coupling` checked against its joints (`casecal.model.coupling.make_coupling`)."""
+    from .coupling import Coupling, make_coupling
+
+    c = robot.coupling
+    label = f"robot {robot.name!r}"
+    if not isinstance(c, Coupling):
+        raise CalibrationError(
+            f"{label}: coupling must be a casecal.model.coupling.Coupling; use "
+            "Robot.with_coupling(M, b)"
+        )
+    return make_coupling(c.matrix, c.offset, c.limits, tuple(robot.joints), label)
 
 
 def _points(name: str, points) -> tuple[tuple[float, float, float], ...]:

@@ -50,6 +50,15 @@ def export(robot, path) -> Export:
                 f"{path}: a UR kinematics file holds one arm, and robot {robot.name!r} is a "
                 "tree with several tips; save it as .urdf or .toml"
             )
+        if robot.coupling is not None:
+            what = "a URDF" if suffix == ".urdf" else "a UR kinematics file"
+            raise CalibrationError(
+                f"{path}: robot {robot.name!r} couples its joints "
+                f"({'; '.join(robot.coupling.describe(robot.joint_types))}, from the "
+                f"controller's joints): {what} cannot hold that, and without it the file "
+                "would take the controller's joint values for the model's; not written: save "
+                "as .toml, which keeps the coupling"
+            )
         if suffix == ".urdf":
             from .urdf_out import robot_to_urdf as writer
             from .urdf_out import urdf_contract as contract_of
@@ -57,6 +66,17 @@ def export(robot, path) -> Export:
             from .ur_kinematics import ur_kinematics_contract as contract_of
             from .ur_kinematics import ur_kinematics_text as writer
         text, notes = writer(robot)
+        if robot.sizes:  # no kinematics, so no loss the read-back check could see
+            from .parameters import sizes_text
+
+            notes = [
+                *notes,
+                f"the robot's own sizes of a real deviation ({sizes_text(robot.sizes)}) "
+                "have no place in this file and are not written: a fit of the robot read "
+                "from it uses the industrial defaults; save as .toml to keep them, or give "
+                "them again (Robot.with_plausible, identify --plausible-length-mm and "
+                "--plausible-angle-deg)",
+            ]
         contract = contract_of(robot, str(path))
         if robot.terms:
             names = ", ".join(sorted({t.kind.replace("_", " ") for t in robot.terms}))

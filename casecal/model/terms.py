@@ -399,7 +399,7 @@ def compliance_terms(robot, joints=None, lumped=None) -> list[ErrorTerm]:
     ]
     if joints is not None:
         return terms
-    probe = robot.with_terms(*terms)
+    probe = robot.uncoupled().with_terms(*terms)  # n model joints
     lo, hi = probe.limits.T
     q = lo + (hi - lo) * np.random.default_rng(0).random((64, n))
     moving = []

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from .robot import Robot
 from .terms_toml import inertial_lines, terms_lines
 
@@ -70,7 +72,55 @@ def robot_to_toml(robot: Robot) -> str:
         top += 1
     at = lines.index('angle_unit = "rad"') + 1
     lines[at:at] = extra[:top]
-    return "\n".join(lines + extra[top:]) + "\n"
+    lines += extra[top:] + _coupling_lines(robot) + _sizes_lines(robot)
+    return "\n".join(lines) + "\n"
+
+
+def _coupling_lines(robot: Robot) -> list[str]:
+    """The robot's joint coupling as a ``[coupling]`` table (SI, like the rest of the file):
+    the model joints that are not their controller joint's own."""
+    c = robot.coupling
+    if c is None:
+        return []
+    lines = ["", "[coupling]  # model joints from the controller's: q_model = M q + b"]
+    if not c.square:
+        lines.append(f"controller_joints = {c.n_controller}")
+    M, b = c.M, c.b
+    for i in range(c.n_model):
+        if i < c.n_controller and M[i, i] == 1 and np.count_nonzero(M[i]) == 1 and b[i] == 0:
+            continue  # the controller joint of its number: the default
+        items = [f"q{j + 1} = {float(v)!r}" for j, v in enumerate(M[i]) if v != 0]
+        if b[i] != 0:
+            items.append(f"offset = {float(b[i])!r}")
+        lines.append(f"q{i + 1} = {{{', '.join(items)}}}")
+    if c.limits:
+        rows = ", ".join(
+            "[]" if lim is None else f"[{float(lim[0])!r}, {float(lim[1])!r}]" for lim in c.limits
+        )
+        lines.append(f"limits = [{rows}]")
+    return lines
+
+
+def _sizes_lines(robot: Robot) -> list[str]:
+    """The robot's own sizes (`Robot.sizes`) as a ``[plausible]`` table, SI to the last
+    digit (the comment gives mm and degrees); none for the defaults."""
+    if not robot.sizes:
+        return []
+    from .parameters import UNITS
+
+    keys = {"m": "length_m", "rad": "angle_rad"}
+
+    def table(header: str, index: int) -> list[str]:
+        rows = ["", header]
+        for si, *values in robot.sizes:
+            facts, value = UNITS[si], values[index]
+            key = keys.get(si, _q(si))
+            unit = "°" if facts.shown == "deg" else " " + facts.shown
+            shown = f"{value * facts.factor:.6g}{unit}"
+            rows.append(f"{key} = {float(value)!r}  # {shown}")
+        return rows
+
+    return table("[plausible]", 0) + table("[plausible.poorly]", 1)
 
 
 def _q(text: str) -> str:
