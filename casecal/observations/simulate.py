@@ -189,9 +189,8 @@ def _inside(uv: np.ndarray, size: tuple[int, int], margin: float) -> np.ndarray:
     # OpenCV's pixel centres are at integers: the image spans [-0.5, W - 0.5]
     w, h = size
     u, v = uv[..., 0], uv[..., 1]
-    return (
-        (u >= margin - 0.5) & (u <= w - 0.5 - margin) & (v >= margin - 0.5) & (v <= h - 0.5 - margin)
-    )
+    lo = margin - 0.5
+    return (u >= lo) & (u <= w - 0.5 - margin) & (v >= lo) & (v <= h - 0.5 - margin)
 
 
 def board_tilt(robot, q, setup: CameraSetup) -> np.ndarray:
@@ -221,7 +220,7 @@ def visible(
     board's printed face turned to the camera by at most `max_tilt` (rad).
     """
     p = points_in_camera(robot, q, setup)
-    n, m, _ = p.shape
+    m = p.shape[1]
     ok = in_front(p).all(axis=1)
     ok &= board_tilt(robot, q, setup) <= max_tilt
     if ok.any():
