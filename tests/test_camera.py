@@ -433,3 +433,86 @@ def test_inverse_and_look_at():
         CameraSetup("eye_in_hand", 2 * np.eye(4), np.eye(4), LENS)
     with pytest.raises(cc.CalibrationError, match="mode"):
         CameraSetup("eye_on_hand", np.eye(4), np.eye(4), LENS)
+
+
+# --- residuals and their Jacobian ---------------------------------------------------------
+
+
+def cv2_residuals(robot, q, pixels, mode, camera, target, intr, board, sigma):
+    """(uv − π)/σ with π from cv2.projectPoints of T_cam←target composed here."""
+    K, dist = intr.to_opencv()
+    out = []
+    for qi, uvi in zip(np.atleast_2d(q), pixels, strict=True):
+        T = robot.fk(qi)
+        M = (
+            np.linalg.inv(T @ camera) @ target
+            if mode == "eye_in_hand"
+            else np.linalg.inv(camera) @ T @ target
+        )
+        uv, _ = cv2.projectPoints(board.corners(), cv2.Rodrigues(M[:3, :3])[0], M[:3, 3], K, dist)
+        out.append((uvi - uv.reshape(-1, 2)) / sigma)
+    return np.ravel(out)
+
+
+def moved(T, delta):
+    """T moved by (δt, δw) in its parent frame: [exp([δw]×) R | t + δt], via OpenCV."""
+    out = np.array(T, dtype=float)
+    out[:3, :3] = cv2.Rodrigues(np.asarray(delta[3:], float))[0] @ out[:3, :3]
+    out[:3, 3] += delta[:3]
+    return out
+
+
+@pytest.mark.parametrize("make", [eye_in_hand_setup, eye_to_hand_setup])
+def test_residual_jacobian_matches_central_differences(puma, make):
+    """Every column (37 robot parameters in deviations, 2 × 6 pose deviations, 9
+    intrinsics) against central differences of residuals computed with OpenCV."""
+    from casecal.observations.residuals import camera_residuals
+
+    setup = make(puma)
+    q = select_views(puma, 4, setup, seed=6, q_centre=PUMA_Q0, spread=0.15)
+    uv = simulate_pixels(puma, q, setup, sigma_px=0.3, seed=7)
+    sigma = 0.3
+    r, J, names = camera_residuals(puma, q, uv, setup, sigma_px=sigma)
+    assert J.shape == (4 * 63 * 2, 37 + 12 + 9) and len(names) == J.shape[1]
+    args = (setup.mode, setup.camera, setup.target, setup.intrinsics, setup.board, sigma)
+    assert np.abs(r - cv2_residuals(puma, q, uv, *args)).max() < 1e-8
+
+    def at(name, h):
+        robot, mode, camera, target, intr, board, s = puma, *args
+        if name in puma.parameter_names:
+            robot = puma.with_deviations({name: h})
+        elif name.startswith(("camera_", "target_")):
+            k = ["x", "y", "z", "wx", "wy", "wz"].index(name.partition("_")[2])
+            delta = h * np.eye(6)[k]
+            if name.startswith("camera_"):
+                camera = moved(camera, delta)
+            else:
+                target = moved(target, delta)
+        else:
+            v = intr.vector() + h * np.eye(9)[INTRINSIC_NAMES.index(name)]
+            intr = Intrinsics.from_vector(v)
+        return cv2_residuals(robot, q, uv, mode, camera, target, intr, board, s)
+
+    for k, name in enumerate(names):
+        h = 1e-3 if name in ("fx", "fy", "cx", "cy") else 1e-6
+        fd = (at(name, h) - at(name, -h)) / (2 * h)
+        scale = max(1.0, np.abs(J[:, k]).max())
+        assert np.abs(J[:, k] - fd).max() < 1e-6 * scale, name
+
+
+def test_residuals_refuse_what_they_do_not_support(puma):
+    from casecal.observations.residuals import camera_residuals
+
+    setup = eye_in_hand_setup(puma)
+    q = select_views(puma, 2, setup, seed=6, q_centre=PUMA_Q0, spread=0.15)
+    uv = simulate_pixels(puma, q, setup)
+    r, J, names = camera_residuals(puma, q, uv, setup, parameters=[], poses=False)
+    assert np.abs(r).max() < 1e-9 and names == list(INTRINSIC_NAMES) and J.shape == (252, 9)
+    bad = uv.copy()
+    bad[0, 3, 0] = np.nan
+    with pytest.raises(cc.CalibrationError, match="not finite"):
+        camera_residuals(puma, q, bad, setup)
+    with pytest.raises(cc.CalibrationError, match="shape"):
+        camera_residuals(puma, q, uv[:, :-1], setup)
+    with pytest.raises(cc.CalibrationError, match="sigma_px"):
+        camera_residuals(puma, q, uv, setup, sigma_px=0)
