@@ -11,9 +11,17 @@ Seen in an upright image with x to the right and y down, z points away from the 
 printed face is the board's −z side (a camera sees it when the camera's centre has z < 0 in
 the board frame).
 
-A detector fixes this order only up to the board's symmetry (`Checkerboard.symmetric`): with
-rows + cols even, a board turned 180° about its z axis shows the same colours, and OpenCV may
-return the corners reversed (k → n − 1 − k).
+The colours: the square diagonally outside corner 0 (around (−s/2, −s/2)) is black, and so is
+every square whose row and column, counted from that one, add up to an even number.
+
+A detector fixes this order only up to the board's symmetry (`Checkerboard.symmetric`). With
+rows + cols odd the colours fix it: OpenCV 4.8-5.0 returns this order at any turn of such a
+board (tests/test_camera.py renders boards and checks). With rows + cols even (the 7 × 9
+default) a board turned 180° about its z axis shows the same colours, and OpenCV returns the
+corners in this order or reversed (k → n − 1 − k), depending on how the board is turned in
+the image; with rows == cols a 90° turn is possible too. Put the detections in this order
+before using them (e.g. the labelling nearest the prediction), or use a board with
+rows + cols odd.
 """
 
 from __future__ import annotations
