@@ -15,7 +15,7 @@ The colours: the square diagonally outside corner 0 (around (−s/2, −s/2)) is
 every square whose row and column, counted from that one, add up to an even number.
 
 A detector fixes this order only up to the board's symmetry (`Checkerboard.symmetric`). With
-rows + cols odd the colours fix it: OpenCV 4.8-5.0 returns this order at any turn of such a
+rows + cols odd the colours fix it: OpenCV (5.0 tested) returns this order at any turn of such a
 board (tests/test_camera.py renders boards and checks). With rows + cols even (the 7 × 9
 default) a board turned 180° about its z axis shows the same colours, and OpenCV returns the
 corners in this order or reversed (k → n − 1 − k), depending on how the board is turned in
