@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import tarfile
@@ -43,8 +44,9 @@ def child(poses: int, repeat: int) -> None:
     robot = cc.load_robot(ROBOT)
     q = cc.poses.uniform(robot, poses, seed=0)
     rng = np.random.default_rng(1)
-    names = [n for n in robot.parameter_names if n[:1] in "tdab" and n[-1].isdigit()]
-    scale = [ANGLE if n.startswith(("theta", "alpha", "beta")) else LENGTH for n in names]
+    # the default parameters are the paper's (theta, d, a; alpha held): a truth inside them
+    names = [n for n in robot.parameter_names if n.rstrip("0123456789") in ("theta", "d", "a")]
+    scale = [ANGLE if n.startswith("theta") else LENGTH for n in names]
     true = robot.with_deviations(dict(zip(names, rng.normal(size=len(names)) * scale, strict=True)))
     meas = cc.simulate(true, q, NOISE, seed=2)
     cal = cc.identify(robot, meas)  # warm-up: kernels compiled or loaded
@@ -103,6 +105,8 @@ def main() -> None:
     if args.child:
         return child(args.child, args.repeat)
 
+    # killed, the temporary copy of the old package is removed all the same
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     with tempfile.TemporaryDirectory(prefix="casecal-bench-versions-") as tmp:
         old = unpack(args.old, Path(tmp))

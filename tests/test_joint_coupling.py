@@ -9,6 +9,7 @@ controller joints, the simulated truth.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -375,3 +376,70 @@ def test_distances_and_validation_in_controller_joints():
     held_out = cc.simulate(true, cc.poses.uniform(coupled, 60, seed=4), noise=1e-6, seed=5)
     check = cc.validate(cal.robot, held_out, coupled)
     assert check.after.rms < 5e-6 < 1e-3 < check.before.rms
+
+
+def test_a_passive_joint_passes_the_audit_with_the_default_and_all(write_toml):
+    """The audit's workspace poses are the coupled robot's (controller joints through the
+    coupling): drawn from the model's hull, the passive joint moved on its own there and
+    the audit failed a fit 0.002 mm from the truth, saying poses across the joint ranges
+    would see theta4 and a4, which no pose of this robot can (review of issue 21)."""
+    torso = cc.load_robot(write_toml(TORSO_TOML))
+    true = torso.with_deviations({"a2": 1e-3, "a4": -1e-3, "theta2": 1e-3})
+    meas = cc.simulate(true, cc.poses.uniform(torso, 200, seed=1), 1e-5, seed=2)
+    q_t = cc.poses.uniform(torso, 300, seed=8)
+    for parameters in (None, "all"):
+        cal = cc.identify(torso, meas, parameters)
+        assert cal.success, cal.message
+        error = np.linalg.norm(cal.robot.position(q_t) - true.position(q_t), axis=-1)
+        assert error.mean() < 2e-5 < np.linalg.norm(torso.position(q_t) - true.position(q_t))
+    model = torso.uncoupled()
+    q_model = cc.poses.uniform(model, 50, seed=0)
+    np.testing.assert_allclose(
+        q_model[:, 3], -q_model[:, 1] - q_model[:, 2] + math.radians(5), rtol=0, atol=1e-15
+    )
+    assert cal.robot.reached_through == () and model.recoupled(torso) == torso
+
+
+def test_a_coupled_robot_with_sessions_has_its_summary():
+    """`cal.nominal` of a coupled fit keeps the sessions' frames: the summary and the table
+    looked the later sessions' names up in a nominal without them (KeyError)."""
+    _, _, _, coupled = parallelogram()
+    true = coupled.with_deviations({"a2": 4e-4})
+    labels = np.repeat(["mon", "tue"], 60)
+    tue = ((2.0, 0.5, 0.1), (0.0, 0.0, 1.2))
+    meas = cc.simulate(
+        true,
+        cc.poses.uniform(coupled, 120, seed=1),
+        2e-5,
+        seed=2,
+        session=labels,
+        frames={"tue": tue},
+    )
+    cal = cc.identify(coupled, meas)
+    assert cal.success and "base_x@tue" in set(cal.table["parameter"])
+    assert "tue" in str(cal.summary())
+    np.testing.assert_allclose(cal.sessions["tue"].base.xyz, tue[0], atol=1e-4)
+    held = cc.simulate(true, cc.poses.uniform(coupled, 40, seed=5), 2e-5, seed=3)
+    assert cc.validate(cal.robot, held, cal.nominal).after.rms < 5e-5
+
+
+def test_a_urdf_tree_takes_a_passive_joint():
+    """A URDF's joints all carry limits: with fewer controller joints, each takes those of
+    the model joint it drives one to one (refused before: the rows must carry none)."""
+    urdf = Path(__file__).parents[1] / "examples" / "two_arms.urdf"
+    tree = cc.load_robot(urdf, tip_link=["right_marker", "left_marker"])
+    n = tree.model_dof
+    M = np.zeros((n, n - 1))
+    M[: n - 1, : n - 1] = np.eye(n - 1)
+    M[n - 1, 0] = -1.0  # the last joint turns back by the first
+    coupled = tree.with_coupling(M, b=np.r_[np.zeros(n - 1), 0.1])
+    np.testing.assert_array_equal(coupled.limits, tree.limits[: n - 1])
+    assert all(j.limits is None for j in coupled.joints)
+    q = cc.poses.uniform(coupled, 120, seed=1)
+    true = coupled.with_deviations({"torso_yaw.x": 1e-3, "left_elbow.roll": 1e-3})
+    cal = cc.identify(coupled, cc.simulate(true, q, 0.2e-3, seed=1))
+    q_t = cc.poses.uniform(coupled, 100, seed=2)
+    assert cal.success
+    assert np.abs(cal.robot.position(q_t) - true.position(q_t)).max() < 1e-3
+    with pytest.raises(cc.CalibrationError, match="drives no model joint one to one"):
+        tree.with_coupling(np.r_[np.eye(n - 1)[:-1], np.ones((2, n - 1))])

@@ -322,3 +322,18 @@ def test_cli_refuses_bad_sizes(value, capsys):
         main(["identify", "puma560", "m.csv", "--plausible-length-mm", value])
     assert info.value.code == 2
     assert "is not a size" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "needle"),
+    [
+        ({"length": 10}, "millimetres in metres"),
+        ({"angle": 2}, "degrees in radians"),
+        ({"length": (0.001, 0.05)}, "exceeds its plausible deviation"),
+    ],
+)
+def test_sizes_that_are_a_unit_slip_are_refused(kwargs, needle):
+    """10 m or 2 rad as a plausible deviation is mm or degrees given as SI: refused, as is
+    a poorly determined bound larger than the deviation (review of issue 21)."""
+    with pytest.raises(cc.CalibrationError, match=needle):
+        cc.load_robot("puma560").with_plausible(**kwargs)

@@ -417,3 +417,18 @@ def test_monte_carlo_sessions_shrink_errors_that_match_the_spread():
         assert 1 / 1.3 < s < 1.3, (count, s)
         # each parameter alone: 24 seeds know a spread to ±15 %, so ±3 of that
         assert all(1 / 1.5 < r < 1.5 for r in ratio[count].values()), (count, ratio[count])
+
+
+def test_a_session_fits_nominal_and_predictions_serve_new_poses(five):
+    """`cal.nominal` carries the sessions' frames: `validate` with it, and the predicted
+    error at new poses, work in the first session's frame (they refused 'base_x@…')."""
+    from casecal.design.campaign import calibrate_until, pool_measure, predicted_error
+
+    nom, deviations, cal = five.nom, five.deviations, five.cal
+    q = cc.poses.uniform(nom, 40, seed=8)
+    held = cc.simulate(nom.with_deviations(deviations), q, 5e-5, seed=9)
+    assert cc.validate(cal.robot, held, cal.nominal) == cc.validate(cal.robot, held, nom)
+    assert 0 < predicted_error(cal, q) < 1e-3
+    _, measure = pool_measure(five.meas)
+    with pytest.raises(cc.CalibrationError, match="several sessions"):
+        calibrate_until(nom, measure, candidates=five.meas.q, order="uniform")

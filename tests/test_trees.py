@@ -7,8 +7,10 @@ from __future__ import annotations
 import dataclasses
 import re
 import time
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import casecal as cc
@@ -507,3 +509,44 @@ def test_a_30_joint_tree_at_10000_poses_identifies_in_seconds(tmp_path):
     assert cal.success, cal.message
     assert err.mean() < 0.05e-3
     assert seconds < 30
+
+
+EXAMPLE = Path(__file__).parents[1] / "examples" / "two_arms.urdf"
+
+
+@pytest.mark.parametrize("factor", [1000.0, 10.0, 25.4])
+def test_one_tip_in_another_unit_is_refused_by_name(tmp_path, factor):
+    """One hand's columns in metres (or cm, inches) under ``_mm`` headers: pooled with the
+    other hand's, the size check saw a robot of the right size, and the fit shrank that
+    arm onto them and said success, 1 m wrong at that hand (review of issue 21's merge)."""
+    tree = cc.load_robot(EXAMPLE, tip_link=TIPS)
+    true = tree.with_deviations({"torso_yaw.x": 1e-3, "left_elbow.roll": 1e-3})
+    meas = cc.simulate(true, cc.poses.uniform(tree, 150, seed=1), 0.5e-3, seed=2)
+    path = tmp_path / "m.csv"
+    cc.write_csv(path, meas, tree)
+    frame = pd.read_csv(path)
+    left = [c for c in frame.columns if c.startswith("left_marker_")]
+    frame[left] /= factor
+    frame.to_csv(path, index=False)
+    with pytest.raises(cc.CalibrationError, match=r"tip 'left_marker'.*left_marker_x"):
+        cc.read_csv(path, tree)
+    positions = meas.positions.copy()
+    positions[:, 1] /= factor
+    scaled = dataclasses.replace(meas, positions=positions)
+    with pytest.raises(cc.CalibrationError, match="tip 'left_marker'"):
+        cc.identify(tree, scaled)
+
+
+def test_the_audit_sees_one_branch_shrunk():
+    """The audit's size check looks at each tip too: one arm at 1/1000 of its size fails
+    it, naming that tip, while the robot as a whole is near its size."""
+    from casecal.identification.scale import size_check
+
+    tree = cc.load_robot(EXAMPLE, tip_link=TIPS)
+    left = {n: v / 1000 for n, v in tree.parameters.items() if n.startswith("left_")}
+    left = {n: v for n, v in left.items() if n.endswith((".x", ".y", ".z"))}
+    shrunk = tree.with_parameters({**left, "left_marker.x": 0.0, "left_marker.y": 0.0})
+    q = cc.poses.uniform(tree, 50, seed=0)
+    check = size_check(tree, shrunk, q, shrunk.measured_points(q))
+    assert check.passed is False and "tip 'left_marker'" in check.text
+    assert size_check(tree, tree, q, tree.measured_points(q)).passed is True

@@ -26,6 +26,7 @@ A finding that is possible but not certain is a `CalibrationWarning`; the fit's 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
@@ -110,6 +111,8 @@ class PositionFinding:
     """The nominal cloud is so nearly a rotation about one point (only the wrist turned)
     that a tool the robot file lacks could explain the size (`unmodelled_tool_possible`)."""
     refused: bool
+    tip: str | None = None
+    """A tree's tip whose points alone are off in size (the others' hid it), else None."""
 
 
 @dataclass(frozen=True)
@@ -135,15 +138,18 @@ def _nominal_points(robot: Robot, q: np.ndarray, m: int) -> np.ndarray | None:
     return P
 
 
-def rotating_residual(robot: Robot, q: np.ndarray, P: np.ndarray) -> float:
+def rotating_residual(robot: Robot, q: np.ndarray, P: np.ndarray, tip: int | None = None) -> float:
     """How far the nominal cloud is from a rotation about one point: the relative RMS
     residual of ``P_ij - mean ≈ (R_i - mean R) u_j`` (a rotating offset u_j per point,
     R_i the tool's rotation); 0 when only the wrist turned about a fixed point, 0 also
-    when the robot's rotations cannot be had (then nothing is excluded)."""
+    when the robot's rotations cannot be had (then nothing is excluded). `tip`: `P` is
+    that tip's of a tree."""
     try:
         T = robot.fk(q)
     except ValueError:  # a robot fk does not serve
         return 0.0
+    if tip is not None:
+        T = T[:, tip]
     if T.ndim == 4 and T.shape[:2] == P.shape[:2]:  # a tree: each tip turns with its own
         Pc = P - P.mean(axis=0)
         total = float(np.sum(Pc * Pc))
@@ -205,6 +211,19 @@ def check_positions(robot: Robot, q: np.ndarray, points: np.ndarray) -> Position
     P = _nominal_points(robot, q, points.shape[1])
     if P is None:
         return None
+    found = _compare(robot, q, P, points)
+    if found is not None or not robot.is_tree:
+        return found
+    # one tip in another unit among tips in the right one: pooled, the others hide it
+    for k, tip in enumerate(robot.tips):
+        found = _compare(robot, q, P[:, [k]], points[:, [k]], tip=k)
+        if found is not None:
+            return dataclasses.replace(found, tip=tip)
+    return None
+
+
+def _compare(robot, q, P, points, tip=None) -> PositionFinding | None:
+    """`check_positions` of the nominal cloud `P` and the measured `points` (N, m, 3)."""
     fit = similarity(P.reshape(-1, 3), points.reshape(-1, 3))
     if not fit.spread_nominal > 1e-6 or not fit.spread_measured > 0:
         return None
@@ -214,7 +233,7 @@ def check_positions(robot: Robot, q: np.ndarray, points: np.ndarray) -> Position
     named = length_unit_slip(ratio) is not None
     if not far or not (copy or named):
         return None
-    tool_could_explain = unmodelled_tool_possible(ratio, rotating_residual(robot, q, P))
+    tool_could_explain = unmodelled_tool_possible(ratio, rotating_residual(robot, q, P, tip))
     refused = copy and not tool_could_explain
     return PositionFinding(ratio, fit.shape_error, tool_could_explain, refused)
 
@@ -374,6 +393,10 @@ def at_the_door(
     position = check_positions(robot, q, points)
     if position is None:
         return
+    if position.tip is not None:  # one tip's columns, not all of them
+        prefix += f"tip {position.tip!r}: "
+        if position_columns is not None:
+            position_columns = f"its columns ({position.tip}_x…)"
     text = prefix + position_text(position, position_columns, declared)
     if position.refused:
         raise CalibrationError(text)

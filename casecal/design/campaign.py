@@ -84,9 +84,14 @@ def predicted_error(cal: Calibration, q_holdout: np.ndarray, level: float = 0.95
     eigenvalues. `C` is inflated by the fit's reduced χ² when that exceeds 1, so a model
     that does not fit its data cannot promise a small error.
     """
-    J, _ = cal.robot.position_jacobian(q_holdout, list(cal.estimated), deviations=True)
+    # new poses in the first session's frame (`cal.robot`'s): the later sessions' frames
+    # move none of them, so their rows and columns of the covariance drop out
+    own = [k for k, n in enumerate(cal.estimated) if n in cal.robot.parameters]
+    names = [cal.estimated[k] for k in own]
+    J, _ = cal.robot.position_jacobian(q_holdout, names, deviations=True)
     J = J.reshape(-1, 3, J.shape[-1])  # a tree's rows per tip: each tip's error its own
-    cov = np.einsum("nik,kl,njl->nij", J, cal.covariance, J)  # (N, 3, 3)
+    C = np.asarray(cal.covariance)[np.ix_(own, own)]
+    cov = np.einsum("nik,kl,njl->nij", J, C, J)  # (N, 3, 3)
     lam = np.clip(np.linalg.eigvalsh(cov), 0.0, None)  # (N, 3)
     radius = np.quantile(np.sqrt((_Z**2) @ lam.T), level, axis=0)  # (N,)
     chi2 = cal.reduced_chi2
@@ -189,6 +194,12 @@ def calibrate_until(
         if not isinstance(got, Measurements) or got.n_poses != len(new):
             raise CalibrationError(
                 "measure(q) must return a Measurements with one row per requested pose"
+            )
+        if got.session is not None:
+            raise CalibrationError(
+                "calibrate_until does not take measurements of several sessions yet (a "
+                "session column): its batches would split the sessions into a few poses "
+                "each; measure one session, or fit the sessions with identify"
             )
         meas = got if meas is None else meas.concat(got)
         try:

@@ -67,7 +67,8 @@ def uniform(robot: Robot, n: int, seed=None) -> np.ndarray:
     Parameters
     ----------
     robot : Robot
-        Its `Robot.limits` are used (±180° for revolute joints without limits).
+        Its `Robot.limits` are used (±180° for revolute joints without limits); a coupled
+        robot's model (`Robot.uncoupled`) is drawn through its controller joints.
     n : int
         Number of poses.
     seed : int, numpy Generator or None
@@ -80,6 +81,10 @@ def uniform(robot: Robot, n: int, seed=None) -> np.ndarray:
     """
     n = _check_count(n)
     rng = rng_from(seed)
+    if robot.reached_through:  # a coupled robot's model: the poses the coupling reaches
+        coupling, limits = robot.reached_through
+        limits = np.asarray(limits)
+        return coupling.model(rng.uniform(limits[:, 0], limits[:, 1], size=(n, len(limits))))
     limits = robot.limits
     return rng.uniform(limits[:, 0], limits[:, 1], size=(n, robot.dof))
 

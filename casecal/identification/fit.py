@@ -352,7 +352,7 @@ def _coupled(robot: Robot, measurements: Measurements, *args, **options) -> Cali
     cal = identify(robot.uncoupled(), model, *args, **options)
     return dataclasses.replace(
         cal,
-        nominal=robot,
+        nominal=cal.nominal.recoupled(robot),  # with the sessions' frames, if any
         robot=cal.robot.recoupled(robot),
         still_joints=still_joints(measurements.q, robot),
     )

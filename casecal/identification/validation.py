@@ -124,6 +124,10 @@ def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> V
     measurements : Measurements
         Poses not used in the calibration.
     """
+    if nominal.sessions:  # a session fit's nominal (`Calibration.nominal`): the robot itself
+        nominal = nominal.with_sessions(())
+    if calibrated.sessions:
+        calibrated = calibrated.with_sessions(())
     if nominal.points == () and calibrated.points:
         nominal = nominal.with_points(calibrated.points)
     before, rotation_before = refit_frames(nominal, measurements)

@@ -207,6 +207,41 @@ def make_coupling(matrix, offset, limits, joints, label: str) -> Coupling | None
     )
 
 
+def limits_from_rows(M, b, joints, label: str) -> tuple | None:
+    """Per controller joint the limits of the model joint it drives one to one (row i is
+    ``q_i = q_c + b_i``), shifted by the offset, for a coupling with fewer controller joints
+    than model joints given without limits (`Robot.with_coupling`); None for a square `M`
+    (the rows keep their limits) or one that is not a matrix (`make_coupling` says so)."""
+    try:
+        M = np.asarray(M, dtype=float)
+        b = np.zeros(len(joints)) if b is None else np.asarray(b, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    if (
+        M.ndim != 2
+        or M.shape[0] != len(joints)
+        or M.shape[1] >= M.shape[0]
+        or b.shape != (len(joints),)
+    ):
+        return None
+    out = []
+    for c in range(M.shape[1]):
+        rows = [
+            i
+            for i in range(M.shape[0])
+            if M[i, c] == 1.0 and np.count_nonzero(M[i]) == 1 and joints[i].limits is not None
+        ]
+        if not rows:
+            raise CalibrationError(
+                f"{label}: controller joint {c + 1} drives no model joint one to one whose "
+                "limits it could take; give the controller joints' limits with the coupling "
+                "(limits=)"
+            )
+        low, high = joints[rows[0]].limits
+        out.append((low - b[rows[0]], high - b[rows[0]]))
+    return tuple(out)
+
+
 _TWICE = (
     "{label}: with as many controller joints as model joints the model's joint rows carry "
     "the limits (row i for controller joint i); give none with the coupling"

@@ -244,6 +244,29 @@ def facts_of(name: str, sizes=()) -> Unit:
     return unit_facts(unit(name), sizes)
 
 
+SANE_SIZE = {"m": 0.5, "rad": 0.5}
+"""Plausible deviations at or past these (SI: 0.5 m, 0.5 rad ≈ 29°) are no calibration's:
+millimetres or degrees given where metres or radians are taken (`checked_sizes`)."""
+
+
+def _check_sane(si: str, plausible: float, poorly: float, label: str) -> None:
+    limit = SANE_SIZE.get(si)
+    if limit is not None and plausible >= limit:
+        unit = "m" if si == "m" else "rad"
+        hint = "millimetres in metres" if si == "m" else "degrees in radians"
+        raise CalibrationError(
+            f"{label}: a plausible deviation of {_what(si)} of {plausible:g} {unit} is no "
+            f"robot's error (sizes are SI: {hint}?); e.g. length=0.01 for 10 mm, "
+            "angle=math.radians(2) for 2°"
+        )
+    if poorly > plausible:
+        raise CalibrationError(
+            f"{label}: the poorly determined bound of {_what(si)} ({_size_text(si, poorly)}) "
+            f"exceeds its plausible deviation ({_size_text(si, plausible)}); it is the "
+            "smaller of the two (the defaults' ratio: 0.4 for lengths, 0.2 for angles)"
+        )
+
+
 def checked_sizes(sizes, label: str = "robot") -> tuple[tuple[str, float, float], ...]:
     """`sizes` as `casecal.Robot.sizes` keeps them: ``(unit, plausible, poorly)`` triples
     of known units with positive, finite SI values, one per unit, sorted by unit, and
@@ -290,6 +313,7 @@ def checked_sizes(sizes, label: str = "robot") -> tuple[tuple[str, float, float]
                     "(it is a size: the largest deviation expected, a standard error)"
                 )
             values.append(float(v))
+        _check_sane(si, values[0], values[1], label)
         out[si] = (values[0], values[1])
     return tuple(
         (si, p, q)

@@ -147,6 +147,11 @@ class Robot:
         (`with_coupling`); None: the controller's joints are the model's. With a coupling,
         every joint value the API takes or returns is the controller's (`dof` of them),
         and `limits` bound the controller joints (`casecal.model.coupling`).
+    reached_through : tuple
+        Set by `uncoupled` only: ``(coupling, controller limits (k, 2))`` of the robot the
+        model came from, so that poses drawn for the model (`casecal.design.poses.uniform`:
+        the audit's workspace) are poses the coupled robot reaches, not its joints' hull
+        (a passive joint moving on its own). Empty otherwise.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -174,6 +179,7 @@ class Robot:
     sessions: tuple = ()
     sizes: tuple = ()
     coupling: object = None
+    reached_through: tuple = ()
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
@@ -309,7 +315,10 @@ class Robot:
         joints = tuple(
             dataclasses.replace(j, limits=r) for j, r in zip(self.joints, ranges, strict=True)
         )
-        return dataclasses.replace(self, joints=joints, coupling=None, auto_beta=False)
+        reached = (self.coupling, tuple(map(tuple, self.limits)))
+        return dataclasses.replace(
+            self, joints=joints, coupling=None, reached_through=reached, auto_beta=False
+        )
 
     def recoupled(self, like: Robot) -> Robot:
         """This robot (a model `uncoupled` from `like`, e.g. calibrated) with `like`'s
@@ -320,7 +329,9 @@ class Robot:
             dataclasses.replace(j, limits=o.limits)
             for j, o in zip(self.joints, like.joints, strict=True)
         )
-        return dataclasses.replace(self, joints=joints, coupling=like.coupling, auto_beta=False)
+        return dataclasses.replace(
+            self, joints=joints, coupling=like.coupling, reached_through=(), auto_beta=False
+        )
 
     def with_coupling(self, M, b=None, limits=None) -> Robot:
         """A new Robot whose model joints follow the controller's: ``q_model = M q + b``.
@@ -336,7 +347,10 @@ class Robot:
         limits : sequence of (float, float) or None, optional
             Only with fewer controller joints than model joints: per controller joint its
             [min, max] (rad or m) or None (a revolute joint without limits). With as many,
-            the joint rows' limits bound the controller joints, row i joint i.
+            the joint rows' limits bound the controller joints, row i joint i. Not given
+            while the joint rows carry limits (a URDF's always do): each controller joint
+            takes those of the model joint it alone drives one to one (``q_i = q_c +
+            b_i``), and the rows keep none; refused if a controller joint drives none so.
 
         Returns
         -------
@@ -357,10 +371,19 @@ class Robot:
         >>> M = np.eye(6); M[2, 1] = M[2, 2] = -1.0  # doctest: +SKIP
         >>> arm = load_robot("kr16_2").with_coupling(M)  # doctest: +SKIP
         """
-        from .coupling import make_coupling
+        from .coupling import limits_from_rows, make_coupling
 
-        coupling = make_coupling(M, b, limits, self.joints, f"robot {self.name!r}")
-        return dataclasses.replace(self, coupling=coupling, auto_beta=False)
+        label = f"robot {self.name!r}"
+        joints = self.joints
+        if limits is None and any(j.limits is not None for j in joints):
+            # a URDF's joints all carry limits: with fewer controller joints, those of the
+            # rows a controller joint drives one to one become that controller joint's
+            found = limits_from_rows(M, b, joints, label)
+            if found is not None:
+                limits = found
+                joints = tuple(dataclasses.replace(j, limits=None) for j in joints)
+        coupling = make_coupling(M, b, limits, joints, label)
+        return dataclasses.replace(self, joints=joints, coupling=coupling, auto_beta=False)
 
     @property
     def n_inputs(self) -> int:
