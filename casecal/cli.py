@@ -254,11 +254,17 @@ def _identify_distances(args: argparse.Namespace, robot) -> None:
     _write_calibrated(args, cal.robot)
 
 
+def _how_to_load(path, robot) -> str:
+    if robot.is_tree and str(path).lower().endswith(".urdf"):  # the file has every link
+        return f"load it with casecal.load_robot or --tip-link {','.join(robot.tips)}"
+    return "load it with casecal.load_robot"
+
+
 def _write_calibrated(args: argparse.Namespace, robot) -> None:
     """Write -o's calibrated robot file, recording which nominal it came from."""
     if args.output:
         write_atomic(args.output, _robot_text(args, robot))
-        print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
+        print(f"\ncalibrated robot written to {args.output} ({_how_to_load(args.output, robot)})")
 
 
 def _check_robot_format(args: argparse.Namespace, robot) -> None:
@@ -298,7 +304,9 @@ def _write_outputs(args: argparse.Namespace, cal) -> None:
         files.append((args.output, _robot_text(args, cal.robot)))
     write_together(files)  # each file recorded as its rename is done, for Ctrl-C's line
     if args.output:
-        print(f"\ncalibrated robot written to {args.output} (load it with casecal.load_robot)")
+        print(
+            f"\ncalibrated robot written to {args.output} ({_how_to_load(args.output, cal.robot)})"
+        )
     if args.deviations_out:
         print(f"deviations with standard errors written to {args.deviations_out}")
 
@@ -451,29 +459,41 @@ def _show_urdf(robot, deg: float, mm: float) -> None:
             " ".join(_fmt(v * mm) for v in j.xyz) + " " + " ".join(_fmt(v * deg) for v in j.rpy)
         )
         axis = ", ".join(f"{v:g}" for v in j.axis)
-        print(f"{j.name:<24} {j.type:>4} {numbers}  ({axis})")
-    for label, frame in (("base", robot.base), ("tool", robot.tool)):
+        parent = ""
+        if robot.is_tree:
+            k = robot.parents[robot.joints.index(j)]
+            parent = f"  on {robot.joints[k].name if k >= 0 else 'the base'}"
+        print(f"{j.name:<24} {j.type:>4} {numbers}  ({axis}){parent}")
+    # a tree is measured at its tips, each with its frame, in place of the tool
+    frames = [("base", robot.base)] + (
+        [(f"tip {t.name} on {robot.joints[t.parent].name}", t) for t in robot.tip_frames]
+        if robot.is_tree
+        else [("tool", robot.tool)]
+    )
+    for label, frame in frames:
         xyz = ", ".join(f"{v * mm:.4f}" for v in frame.xyz)
         rpy = ", ".join(f"{v * deg:.4f}" for v in frame.rpy)
         print(f"{label}: xyz = ({xyz}) mm, rpy = ({rpy}) deg")
 
 
 def robot_for(args: argparse.Namespace, name: str):
-    """`load_robot(name)`, with --base-link and --tip-link for a URDF file."""
+    """`load_robot(name)`, with --base-link and --tip-link for a URDF file (several tip
+    links, comma-separated: a kinematic tree)."""
     note = namesake_note(name)  # a catalog name wins over a file named alike: say so
     if note:
         print(f"casecal: note: {note}", file=sys.stderr)
     if str(name).lower().endswith((".urdf", ".xacro")):
         ends = {k: getattr(args, k, None) for k in ("base_link", "tip_link")}
+        tips = ends["tip_link"]
+        if tips is not None and "," in tips:
+            ends["tip_link"] = [t.strip() for t in tips.split(",")]
+            if not all(ends["tip_link"]):
+                raise CalibrationError(
+                    f"--tip-link {tips!r}: give link names separated by commas, e.g. "
+                    "--tip-link right_marker,left_marker"
+                )
         return load_robot(name, **ends)
-    robot = load_robot(name)
-    if robot.is_tree:  # a robot file of a tree (several tips): its columns and outputs differ
-        raise CalibrationError(
-            f"{name}: robot {robot.name!r} is a kinematic tree ({len(robot.tips)} tips); the "
-            "command line does not take trees yet: use the Python API (casecal.load_robot, "
-            "identify, save_robot)"
-        )
-    return robot
+    return load_robot(name)
 
 
 def _fmt(value: float, width: int = 10) -> str:
@@ -596,7 +616,12 @@ def build_parser() -> argparse.ArgumentParser:
             metavar="LINK",
             default=argparse.SUPPRESS,
             help=f"URDF robots: the chain's {end} link (default: "
-            + ("the root)" if end == "base" else "the end of the one movable chain)"),
+            + (
+                "the root)"
+                if end == "base"
+                else "the end of the one movable chain; several, comma-separated: a "
+                "kinematic tree measured at each, CSV columns LINK_x_mm …)"
+            ),
         )
 
     def command(name, urdf=True, **kwargs):

@@ -347,8 +347,7 @@ def test_a_tree_calibrated_goes_back_into_its_urdf(fitted, tmp_path):
     assert again.tips == robot.tips and again.parents == robot.parents
     assert np.abs(again.fk(q) - cal.robot.fk(q)).max() < 1e-12
     assert again.calibrated_chain == ("pelvis", *TIPS) and nominal_of(again) == robot
-    # the command line does not take trees yet, and says so
-    assert main(["show", str(tmp_path / "calibrated.toml")]) == 2
+    assert main(["show", str(tmp_path / "calibrated.toml")]) == 0  # a tree's file
     text = (tmp_path / "calibrated.toml").read_text()
     (tmp_path / "orphan.toml").write_text(text.replace("parent = 3\n", "", 1))
     with pytest.raises(cc.CalibrationError, match=r"joints\[4\] of a tree .* needs parent"):
@@ -550,3 +549,45 @@ def test_the_audit_sees_one_branch_shrunk():
     check = size_check(tree, shrunk, q, shrunk.measured_points(q))
     assert check.passed is False and "tip 'left_marker'" in check.text
     assert size_check(tree, tree, q, tree.measured_points(q)).passed is True
+
+
+def test_the_command_line_takes_a_tree(tmp_path, capsys):
+    """``--tip-link A,B``: identify writes the calibrated tree (URDF, TOML; a UR file is
+    refused), validate and calibrate-until take it, show lists the tips; compensation and
+    error terms are refused by name (exit 2), as in the API."""
+    tree = cc.load_robot(EXAMPLE, tip_link=TIPS)
+    true = tree.with_deviations({"torso_yaw.x": 1e-3, "left_elbow.roll": 1e-3})
+    cc.write_csv(
+        tmp_path / "m.csv",
+        cc.simulate(true, cc.poses.uniform(tree, 150, seed=1), 2e-4, seed=2),
+        tree,
+    )
+    cc.write_csv(
+        tmp_path / "h.csv",
+        cc.simulate(true, cc.poses.uniform(tree, 60, seed=3), 2e-4, seed=4),
+        tree,
+    )
+    tips = ["--tip-link", ",".join(TIPS)]
+    urdf, m, h = str(EXAMPLE), str(tmp_path / "m.csv"), str(tmp_path / "h.csv")
+    out = str(tmp_path / "cal.urdf")
+    assert main(["identify", urdf, m, "-o", out, *tips]) == 0
+    assert "--tip-link right_marker,left_marker" in capsys.readouterr().out
+    back = cc.load_robot(out, tip_link=TIPS)
+    q = cc.poses.uniform(tree, 100, seed=5)
+    error = np.linalg.norm(back.position(q) - true.position(q), axis=-1)  # base: identity
+    assert (
+        error.mean() < 0.3e-3 < np.linalg.norm(tree.position(q) - true.position(q), axis=-1).mean()
+    )
+    assert main(["identify", urdf, m, "-o", str(tmp_path / "cal.yaml"), *tips]) == 2
+    assert not (tmp_path / "cal.yaml").exists()
+    assert main(["validate", out, h, "--nominal", urdf, *tips]) == 0
+    assert main(["calibrate-until", urdf, m, "--threshold", "2mm", *tips]) == 0
+    capsys.readouterr()
+    assert main(["show", urdf, *tips]) == 0
+    shown = capsys.readouterr().out
+    assert "tip left_marker on left_wrist_roll" in shown and "tool:" not in shown
+    assert (
+        main(["compensate", out, h, "--nominal", urdf, "-o", str(tmp_path / "c.csv"), *tips]) == 2
+    )
+    assert "not supported on a kinematic tree" in capsys.readouterr().err
+    assert main(["show", urdf, "--tip-link", "right_marker,"]) == 2

@@ -160,9 +160,7 @@ def calibrate_until(
     )
     unused = np.ones(len(cand), bool)  # a pose is measured once: repeats would fake data
     q_hold = poses.uniform(robot, 200, seed=seed + 1)
-    k = len(
-        robot.position_jacobian(cand[:1], parameters if parameters else ["theta*", "a*", "d*"])[1]
-    )
+    k = len(selection(robot, parameters))  # the default's as `identify` takes it (a URDF's)
     n = max(batch, -(-k // 3) + 1)  # the first round must be able to identify something
     q = np.zeros((0, robot.dof))
     meas, cal, history, pred = None, None, [], np.inf
