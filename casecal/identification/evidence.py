@@ -29,7 +29,9 @@ STILL = {"R": np.radians(1.0), "P": 1e-3}
 """A joint whose values span less than this (1°, 1 mm) in the data barely moves."""
 
 
-def blind_only_here(problem: Problem, robot: Robot, estimated, held_for_noise) -> tuple[str, ...]:
+def blind_only_here(
+    problem: Problem, robot: Robot, estimated, held_for_noise, free=()
+) -> tuple[str, ...]:
     """Parameters blind at the measured poses that poses across the joint ranges would see.
 
     Parameters
@@ -42,7 +44,23 @@ def blind_only_here(problem: Problem, robot: Robot, estimated, held_for_noise) -
     estimated, held_for_noise : sequence of str
         The estimated parameters, and those held because the noise hides them (tested
         elsewhere).
+    free : sequence of str
+        Parameters outside `problem.names` (in its kernel) that poses across the joint
+        ranges would estimate too: a contact session's frame parameters the data cannot
+        see, when it is the first session, whose frame is the robot's base (what only
+        moves the whole robot is no more seen across the joint ranges than here).
     """
+    if free:
+        names = list(problem.names)
+        problem = problem.restricted([*names, *free])
+        held = [n for n in names if n not in estimated and n not in held_for_noise]
+        q_work = workspace_poses(robot)
+        if q_work is None or not held:
+            return ()
+        J = workspace_jacobian(robot, q_work, problem.names, problem)
+        prefer = [*free, *estimated]
+        elsewhere = analyse(J, problem.names, q_work.shape[0], prefer=prefer).base_parameters
+        return tuple(n for n in held if n in elsewhere)
     names = list(problem.names)
     q_work = workspace_poses(robot)
     held = [n for n in names if n not in estimated and n not in held_for_noise]
@@ -83,7 +101,7 @@ class Outside:
     leading: tuple[str, ...] = ()
 
 
-def outside_gain(problem: Problem, estimated) -> Outside:
+def outside_gain(problem: Problem, estimated, at_size: bool = False) -> Outside:
     """`Outside` of `problem`, at its robot.
 
     Parameters
@@ -93,6 +111,9 @@ def outside_gain(problem: Problem, estimated) -> Outside:
         `estimated` parameters followed by those not asked for.
     estimated : sequence of str
         The estimated parameters.
+    at_size : bool
+        Contact data only: the robot's size, which they cannot see, left out
+        (`casecal.identification.linalg.Reduction.decrease_at_size`).
     """
     names = list(problem.names)
     linear = problem.reduced(np.zeros(len(names)))
@@ -101,8 +122,13 @@ def outside_gain(problem: Problem, estimated) -> Outside:
     extra = [names.index(n) for n in base if n not in estimated]
     if not extra:
         return Outside()
-    inside = linear.columns(est).solve()[1] if est else 0.0
-    gain = linear.columns(est + extra).solve()[1] - inside
-    alone = {names[k]: linear.columns([*est, k]).solve()[1] - inside for k in extra}
+
+    def decrease(index):
+        part = linear.columns(index)
+        return part.decrease_at_size() if at_size else part.solve()[1]
+
+    inside = decrease(est) if est else 0.0
+    gain = decrease(est + extra) - inside
+    alone = {names[k]: decrease([*est, k]) - inside for k in extra}
     leading = sorted(alone, key=alone.get, reverse=True)[:4]
     return Outside(max(gain, 0.0), len(extra), tuple(leading))
