@@ -64,6 +64,35 @@ def check_robot(robot: Robot, measurements) -> None:
         raise CalibrationError("contact sessions measure no orientation; give none")
 
 
+def plausible_error(robot: Robot, names) -> float:
+    """RMS error (m) across the joint ranges of a robot whose asked-for joint parameters
+    deviate by their plausible sizes (`casecal.model.parameters.facts_of`), independently;
+    0 without joint limits.
+
+    A contact session's start residuals say little of the robot's error: where the point
+    or the plane is absorbs most of it (a fixed point's poses differ by turns about it
+    only). The fit then judges what the noise hides against this error instead, the size
+    of what a calibration is for.
+    """
+    from ..design.poses import uniform
+    from ..model import kinematics
+    from ..model.parameters import facts_of
+
+    joint = [n for n in names if not n.startswith(("base_", "tool_"))]
+    try:
+        q = uniform(robot, 200, seed=0)
+    except CalibrationError:
+        return 0.0
+    if not joint:
+        return 0.0
+    chain = kinematics.chain(robot.structure)
+    p = robot.vector()
+    J = chain.evaluate("points_jacobian", q, p, chain.columns(joint), anchor=p)
+    size = np.array([facts_of(n, robot.sizes).plausible for n in joint])
+    per_point = np.sum((J * size) ** 2, axis=(1, 2)) / (J.shape[1] / 3)
+    return float(np.sqrt(np.mean(per_point)))
+
+
 def held_names(label: str, mark: str, kind: str, base_rpy) -> tuple[str, ...]:
     """The blind frame parameters of a contact session (module doc), held at their start.
 

@@ -71,6 +71,22 @@ def blind_only_here(
     return tuple(n for n in held if n in elsewhere)
 
 
+def gauge_bound(problem: Problem, robot: Robot, estimated, free, candidates) -> tuple[str, ...]:
+    """Those of `candidates` that, across the joint ranges, only move the robot as a
+    whole once the `free` frame parameters are free (as a contact session's first frame
+    is, which its data cannot see): no error of theirs shows anywhere, so there is
+    nothing for the data to determine (`blind_only_here`'s `free`)."""
+    q_work = workspace_poses(robot)
+    if q_work is None or not free or not candidates:
+        return ()
+    names = [*problem.names, *(n for n in free if n not in problem.names)]
+    wide = problem.restricted(names)
+    J = workspace_jacobian(robot, q_work, names, wide)
+    prefer = [*free, *estimated]
+    seen = analyse(J, names, q_work.shape[0], prefer=prefer).base_parameters
+    return tuple(n for n in candidates if n not in seen)
+
+
 def still_joints(q: np.ndarray, robot: Robot) -> tuple[str, ...]:
     """Joints that barely move in the data (`STILL`), e.g. ``("q5 = 0.000°",)``."""
     still = []
@@ -101,7 +117,7 @@ class Outside:
     leading: tuple[str, ...] = ()
 
 
-def outside_gain(problem: Problem, estimated, at_size: bool = False) -> Outside:
+def outside_gain(problem: Problem, estimated) -> Outside:
     """`Outside` of `problem`, at its robot.
 
     Parameters
@@ -111,9 +127,6 @@ def outside_gain(problem: Problem, estimated, at_size: bool = False) -> Outside:
         `estimated` parameters followed by those not asked for.
     estimated : sequence of str
         The estimated parameters.
-    at_size : bool
-        Contact data only: the robot's size, which they cannot see, left out
-        (`casecal.identification.linalg.Reduction.decrease_at_size`).
     """
     names = list(problem.names)
     linear = problem.reduced(np.zeros(len(names)))
@@ -123,12 +136,8 @@ def outside_gain(problem: Problem, estimated, at_size: bool = False) -> Outside:
     if not extra:
         return Outside()
 
-    def decrease(index):
-        part = linear.columns(index)
-        return part.decrease_at_size() if at_size else part.solve()[1]
-
-    inside = decrease(est) if est else 0.0
-    gain = decrease(est + extra) - inside
-    alone = {names[k]: decrease([*est, k]) - inside for k in extra}
+    inside = linear.columns(est).solve()[1] if est else 0.0
+    gain = linear.columns(est + extra).solve()[1] - inside
+    alone = {names[k]: linear.columns([*est, k]).solve()[1] - inside for k in extra}
     leading = sorted(alone, key=alone.get, reverse=True)[:4]
     return Outside(max(gain, 0.0), len(extra), tuple(leading))

@@ -13,8 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.parameters import unit
 from .audit import Facts, predicted_rms, smoothness
-from .evidence import blind_only_here, outside_gain, still_joints
+from .evidence import blind_only_here, gauge_bound, outside_gain, still_joints
 from .lack_of_fit import lack_of_fit
 from .linalg import Reduction
 from .outliers import outlier_poses
@@ -86,7 +87,8 @@ def gather(
         too (`casecal.identification.evidence.blind_only_here`).
     at_size : bool
         Contact sessions only: what freeing parameters would gain is judged at the
-        robot's size, which contacts cannot see (`Reduction.decrease_at_size`).
+        robot's size, which contacts cannot see: held parameters by
+        `Reduction.decrease_at_size`, those not asked for without the lengths.
     """
     robust = settings.loss != "linear"
     outside = _outside(robot, names)
@@ -115,9 +117,11 @@ def gather(
         make(out.robot, names=out.estimated), settings.w, settings.known, refit=not robust
     )
     inliers = _inliers(make(out.robot, names=out.estimated), outliers) if robust else None
-    unasked = outside_gain(
-        final.restricted([*out.estimated, *outside]), out.estimated, at_size=at_size
-    )
+    # contacts alone: the lengths not asked for are the robot's size (module doc of
+    # casecal.identification.contact); freeing them all would free the size, which
+    # explains any residual of contacts, so the test frees the others
+    tested = [n for n in outside if unit(n) != "m"] if at_size else outside
+    unasked = outside_gain(final.restricted([*out.estimated, *tested]), out.estimated)
     keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
     n_prior = int(np.sum(prior_w > 0))
     workspace = predicted_rms(out.robot, reference, out.estimated, cov)
@@ -131,6 +135,8 @@ def gather(
             keep if robust else None,  # a robust fit judged on its inliers, unweighted
         )
     )
+    # what only moves the whole robot once the contact frame it is seen in is free
+    gauge_free = gauge_bound(final, out.robot, out.estimated, gauge, out.unsupported)
     facts = Facts(
         solver_status=out.solver_status,
         solver_message=out.message,
@@ -155,7 +161,7 @@ def gather(
         else np.count_nonzero(~est._unmeasured) / 3,
         n_estimated=len(out.estimated),
         one_shot=settings.method == "svd",
-        unsupported=out.unsupported,
+        unsupported=tuple(n for n in out.unsupported if n not in gauge_free),
         held=tuple(out.pruned),
         smoothness=smoothness(q[keep], point_residuals[keep]),
         held_gain=held_gain(

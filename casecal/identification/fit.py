@@ -38,6 +38,7 @@ from .analysis import represent, selection
 from .audit import audit
 from .calibration import STATUS_MESSAGES, Calibration
 from .contact import check_robot as check_contact_robot
+from .contact import plausible_error
 from .facts import gather, point_rms
 from .problem import Problem
 from .reference import FALLBACK_NOTE, frame_parameters, frames_fitted
@@ -281,7 +282,10 @@ def identify(
             {n: reference.parameters[n] for n in names if n.startswith("base_")}
         )
         e0 = _rms_of(make(start, names=names), len(names))
-    out = fit_in_rounds(make, start, names, settings, e_before)
+    e_rounds = e_before
+    if sessions is not None and sessions.kinds:  # contacts hide the robot's error
+        e_rounds = max(e_before, plausible_error(start, names))
+    out = fit_in_rounds(make, start, names, settings, e_rounds)
 
     gauge = [n for n in held if "@" not in n]  # the first session's: the robot's base
     # contacts alone see no size: their points are 0, so shrinking the robot explains
