@@ -18,7 +18,13 @@ import pytest
 
 import casecal as cc
 from casecal.identification.problem import Problem
-from casecal.identification.sessions import resolve, session_robot, start, with_indicators
+from casecal.identification.sessions import (
+    contact_held,
+    resolve,
+    session_robot,
+    start,
+    with_indicators,
+)
 from casecal.model.frames import matrix_from_rpy, rigid_fit, rpy_from_matrix
 from casecal.model.robot import Frame
 
@@ -270,6 +276,34 @@ def test_contact_jacobian_is_central_differences():
     planes = np.isin(meas.session, ["P1", "P2"])
     assert np.all(rows[planes, :2, :] == 0)
     assert np.all(problem.point_residuals(np.zeros(len(names)))[planes, 0, :2] == 0)
+
+
+@pytest.mark.parametrize("normal", [(0.0, 0.0, 1.0), (1.0, 0.0, 0.3), (1.0, 0.0, 0.0)])
+def test_held_plane_parameters_are_the_blind_ones(normal):
+    """Whatever the plane's tilt (a wall at the chart's pitch of 90° too), the three
+    frame parameters held are blind (zero columns, or the one combination of the
+    rotations that is), and the three estimated ones are not."""
+    true, _ = truth()
+    frame = plane_frame(normal, 0.4)
+    q = near_plane(true, frame, 30, seed=4)
+    meas = cc.simulate_contact(true, q, {"P": "plane"}, np.full(30, "P"), frames={"P": frame})
+    tracker = cc.simulate(true, cc.poses.uniform(true, 10, seed=6), 0.0, session=np.full(10, "T"))
+    meas = tracker.concat(meas)
+    nom = nominal()
+    sessions = resolve(nom, meas, None)
+    robot = session_robot(nom, sessions)
+    q = with_indicators(robot, meas.q, sessions)
+    w = np.where(meas.measured, 1.0, 0.0)
+    begin, _ = start(robot, q, meas.points, w, sessions)
+    names = [n for n in robot.parameter_names if n.endswith("@P")]
+    J = Problem(begin, q, meas.points, w, names).jacobian(np.zeros(6))[3 * 10 :]
+    held = contact_held(begin, sessions)
+    assert held[:2] == ["base_x@P", "base_y@P"] and held[2] in ("base_rx@P", "base_rz@P")
+    kept = [names.index(n) for n in names if n not in held]
+    s = np.linalg.svd(J[:, kept], compute_uv=False)
+    assert s[-1] > 1e-3 * s[0]  # the estimated three see the plane
+    s_all = np.linalg.svd(J, compute_uv=False)
+    assert s_all[2] > 1e-3 * s_all[0] and s_all[3] < 1e-9 * s_all[0]  # 3 seen, 3 blind
 
 
 @pytest.mark.filterwarnings("ignore::casecal.errors.CalibrationWarning")  # poses off limits
