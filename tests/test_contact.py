@@ -363,6 +363,21 @@ def test_inf_sigma_never_makes_nan(three_planes):
         cc.Measurements(np.zeros((2, 6)), positions, 1e-5)
 
 
+def test_plane_outliers_and_unstated_noise_count_one_coordinate(three_planes):
+    """A gross touch stands out (its one coordinate judged like a point's three); clean
+    touches do not; without a stated σ the noise and lack-of-fit checks count one
+    coordinate per touch (with three, the lack of fit looked 3× too significant)."""
+    _, _, meas, cal = three_planes
+    assert cal.outliers == ()
+    q = meas.q.copy()
+    q[10, 1] += 2e-3  # the probe triggered 2 mrad of shoulder away: about a millimetre
+    bad = cc.identify(nominal(), dataclasses.replace(meas, q=q), PARAMETERS)
+    assert bad.outliers == (10,) and not bad.success
+    blind = cc.identify(nominal(), meas, PARAMETERS, noise=0.0)
+    assert blind.success, blind.message
+    assert not blind.sigma_known and blind.dof_residual == meas.n_poses - len(blind.estimated)
+
+
 def test_contacts_refused_where_they_cannot_work():
     true, _, frames, meas = plane_campaign(labels=("P1",), per_plane=10)
     nom = nominal()
