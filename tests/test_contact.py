@@ -378,6 +378,22 @@ def test_plane_outliers_and_unstated_noise_count_one_coordinate(three_planes):
     assert not blind.sigma_known and blind.dof_residual == meas.n_poses - len(blind.estimated)
 
 
+def test_a_coordinate_not_measured_in_tracker_data():
+    """σ = inf on some coordinates of measured points (no contact): they weigh nothing,
+    the degrees of freedom lose exactly them, and the fit holds at the noise."""
+    true, _ = truth()
+    meas = cc.simulate(true, cc.poses.uniform(true, 80, seed=3), SIGMA, seed=3)
+    sigma, positions = meas.sigma.copy(), meas.positions.copy()
+    sigma[:30, 2], positions[:30, 2] = np.inf, np.nan
+    part = cc.Measurements(meas.q, positions, sigma)
+    full = cc.identify(nominal(), meas, "theta*,a*,d*,base")
+    cal = cc.identify(nominal(), part, "theta*,a*,d*,base")
+    assert cal.success and full.success, cal.message
+    assert cal.dof_residual == full.dof_residual - 30
+    assert np.all(cal.residuals[:30, 2] == 0) and np.all(np.isfinite(cal.residuals))
+    assert held_out_rms(cal, true) < 2 * SIGMA
+
+
 def test_contacts_refused_where_they_cannot_work():
     true, _, frames, meas = plane_campaign(labels=("P1",), per_plane=10)
     nom = nominal()
@@ -407,6 +423,10 @@ def test_contacts_refused_where_they_cannot_work():
         dataclasses.replace(meas, contact={"P1": "sphere"})
     with pytest.raises(cc.CalibrationError, match="not 0"):
         dataclasses.replace(meas, positions=np.ones((10, 3)))
+    with pytest.raises(cc.CalibrationError, match="validating on contact sessions"):
+        cc.validate(nom, meas, nom)
+    with pytest.raises(cc.CalibrationError, match="comparing models on contact"):
+        cc.compare_models({"dh": nom}, meas)
 
 
 def test_measured_sessions_unchanged_by_a_contact_column():
