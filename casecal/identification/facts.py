@@ -21,7 +21,7 @@ from .linalg import Reduction
 from .outliers import outlier_poses
 from .problem import Problem
 from .rank import held_gain
-from .rounds import Outcome
+from .rounds import Outcome, measured_weights
 from .solvers import ROUNDING, floor_cost
 from .uncertainty import uncertainty
 
@@ -153,7 +153,7 @@ def gather(
         rounds=out.rounds,
         predicted_rms=None if workspace is None else workspace[0],
         correction_rms=0.0 if workspace is None else workspace[1],
-        noise_rms=float(np.sqrt(np.mean(1.0 / settings.w[settings.w > 0] ** 2)))
+        noise_rms=float(np.sqrt(np.mean(1.0 / measured_weights(settings.w) ** 2)))
         if settings.known
         else point_rms(point_residuals, est._unmeasured) / np.sqrt(3.0),
         n_points=point_residuals.size // 3

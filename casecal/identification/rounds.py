@@ -138,7 +138,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         data that match the nominal robot to their noise bound no deviation below it).
     """
     if settings.known:
-        e0 = max(e0, float(np.sqrt(3 * np.mean(1.0 / settings.w[settings.w > 0] ** 2))))
+        e0 = max(e0, float(np.sqrt(3 * np.mean(1.0 / measured_weights(settings.w) ** 2))))
     hold = start.parameters
     start_analysis = check_analysis(make(start, names=names))
     q_work = workspace_poses(start)
@@ -174,7 +174,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         frozen.update(dict.fromkeys(lost, FROZEN))
         J_work = workspace_jacobian(point, q_work, names, full)
         noise = (
-            float(np.sqrt(3 * np.mean(1.0 / settings.w[settings.w > 0] ** 2)))
+            float(np.sqrt(3 * np.mean(1.0 / measured_weights(settings.w) ** 2)))
             if settings.known
             else None
         )
@@ -272,6 +272,12 @@ def _release(make, point, names, settings, weights, hold, order, base, r):
     return point, blind
 
 
+def measured_weights(w: np.ndarray) -> np.ndarray:
+    """The weights `w` of measured coordinates: all of them (the same array) unless some
+    are 0 (σ inf, not measured), which say nothing of the noise."""
+    return w if np.all(w > 0) else w[w > 0]
+
+
 def workspace_poses(robot: Robot):
     """Poses spread within the joint limits (fixed seed), or None without limits."""
     try:
@@ -313,7 +319,7 @@ def _solve_round(make, point, names, estimated, settings: Settings, weights, hol
     if settings.progress is not None:
         rows = settings.w.size  # cost → RMS per coordinate, in σ (or m) units
         # weighted residuals are in σ; back to mm with the RMS σ (1 without σ: in m)
-        scale = 1e3 * float(np.sqrt(np.mean(1.0 / settings.w[settings.w > 0] ** 2)))
+        scale = 1e3 * float(np.sqrt(np.mean(1.0 / measured_weights(settings.w) ** 2)))
 
         def report(it: int, cost: float) -> None:
             rms = scale * np.sqrt(2.0 * cost / rows)
