@@ -38,6 +38,7 @@ _PUBLIC = {
     "robots": "model.catalog",
     "save_robot": "model.save",
     "simulate": "data.measurements",
+    "simulate_contact": "data.measurements",
     "validate": "identification.validation",
     "write_csv": "data.files",
 }

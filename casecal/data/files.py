@@ -16,7 +16,13 @@ One row per pose. Columns (any order; extra columns are kept out of the way and 
   axis ``sigma_x_mm`` … ``sigma_z_mm``;
 - optional ``session``: a label per row naming the measurement session (the instrument
   re-mounted between sessions; `casecal.identify` fits a base frame per session), any
-  text of letters, digits, ``_`` and ``-`` (read as text: ``1`` and ``01`` differ).
+  text of letters, digits, ``_`` and ``-`` (read as text: ``1`` and ``01`` differ);
+- optional ``contact`` (with ``session``): ``point`` on the rows of a session whose tool
+  tip was held in one fixed point, ``plane`` on those of a session touching one plane,
+  empty on rows of measured points; one kind per session
+  (`casecal.identification.contact`). A contact row has no measured position: its x, y, z
+  cells are empty (the columns may be left out when every row is a contact); its ``sigma``
+  is the contact's repeatability (a plane's x and y are not measured: σ inf).
 
 Every mistake raises `CalibrationError` naming the file, the row or column, and the fix.
 """
@@ -75,16 +81,19 @@ def _read_csv(path, robot: Robot) -> Measurements:
     q = read_joints(df, robot, label)
     if robot.inputs:
         q = np.column_stack([q, _inputs(df, robot, label)])
+    session = _session(df, label)
+    contact, touch = _contact(df, session, label)
     if robot.is_tree:
         y, named = _tip_positions(df, robot, label)
         in_metres = not any(re.search(r"_(mm|m|um)$", c) for c in named)
     else:
-        y = _positions(df, columns, label)
+        y = _positions(df, columns, label, touch)
         in_metres = not any(re.fullmatch(r"(p\d+_)?[xyz]_(mm|m|um)", c) for c in columns)
         named = None
-    session = _session(df, label)
-    # each session in its own instrument frame: the unit checks look at one at a time
+    # each session in its own instrument frame: the unit checks look at one at a time;
+    # contact sessions measured no points to check
     groups = [slice(None)] if session is None else [session == s for s in dict.fromkeys(session)]
+    groups = [rows for rows in groups if touch is None or not np.any(touch[rows])]
     for rows in groups:
         if in_metres:
             _check_metres(y[rows], robot, label)
@@ -101,7 +110,44 @@ def _read_csv(path, robot: Robot) -> Measurements:
     if np.any(sigma < 0):
         row = int(np.argwhere(sigma < 0)[0][0])
         raise CalibrationError(f"{label}: row {row + 2}: sigma is negative; it must be >= 0")
-    return Measurements(q=q, positions=y, sigma=sigma, orientations=orientations, session=session)
+    return Measurements(
+        q=q,
+        positions=y,
+        sigma=sigma,
+        orientations=orientations,
+        session=session,
+        contact=contact,
+    )
+
+
+CONTACT_COLUMN = "contact"
+
+
+def _contact(df: pd.DataFrame, session, label: str):
+    """The ``contact`` column as (label -> kind, or None; (N,) bool: contact rows, or None)."""
+    if CONTACT_COLUMN not in df:
+        return None, None
+    if session is None:
+        raise CalibrationError(
+            f"{label}: column 'contact' needs a 'session' column: each fixed point or plane "
+            "is a session of its own"
+        )
+    values = df[CONTACT_COLUMN].astype(str).str.strip().str.lower()
+    values = values.where(~values.isin(_GAPS), "").to_numpy(dtype=str)
+    kinds = {}
+    for row, (text, where) in enumerate(zip(values, session, strict=True)):
+        if text not in ("", "point", "plane"):
+            raise CalibrationError(
+                f"{label}: row {row + 2}, column 'contact': {text!r}; give 'point' (a fixed "
+                "point), 'plane' (a plane touched), or leave it empty (measured points)"
+            )
+        if kinds.setdefault(where, text) != text:
+            raise CalibrationError(
+                f"{label}: row {row + 2}: session {where!r} is {kinds[where] or 'measured'} "
+                f"on earlier rows and {text or 'measured'} here; give a session one kind"
+            )
+    touch = values != ""
+    return {k: v for k, v in kinds.items() if v} or None, touch
 
 
 def _session(df: pd.DataFrame, label: str) -> np.ndarray | None:
@@ -220,14 +266,39 @@ def _listed(names: list[str]) -> str:
     return f"{names[0]} … {names[-1]}"
 
 
-def _positions(df: pd.DataFrame, columns, label: str) -> np.ndarray:
-    """x, y, z -> (N, 3); or p1_x … pm_z (several reflectors) -> (N, m, 3), in m."""
+def _positions(df: pd.DataFrame, columns, label: str, touch=None) -> np.ndarray:
+    """x, y, z -> (N, 3); or p1_x … pm_z (several reflectors) -> (N, m, 3), in m.
+
+    `touch`: the rows of contact sessions (N,) bool, whose cells are empty (NaN here).
+    """
     numbered = sorted({int(m.group(1)) for c in columns if (m := _POINT.match(c))})
+    if touch is not None and np.any(touch) and numbered:
+        raise CalibrationError(
+            f"{label}: contact sessions measure one point per pose; give x, y, z columns "
+            "(or none, when every row is a contact), not numbered points"
+        )
     if not numbered:
-        y = np.empty((len(df), 3))
+        y = np.full((len(df), 3), np.nan)
+        plain = [c for c in columns if re.fullmatch(r"[xyz](_(mm|m|um))?", c)]
+        if touch is not None and np.all(touch) and not plain:
+            return y  # contacts only: nothing measured to read
         for k, axis in enumerate("xyz"):
             name, scale = _pick(df, label, [axis], None)
-            y[:, k] = _numbers(df, name, label) * scale
+            if touch is None or not np.any(touch):
+                y[:, k] = _numbers(df, name, label) * scale
+            else:
+                _contact_cells(df, name, label, touch)
+                values = pd.to_numeric(df[name].astype(str).str.strip(), errors="coerce")
+                values = values.to_numpy(dtype=float)
+                bad = ~np.isfinite(values) & ~touch
+                if bad.any():
+                    row = int(np.flatnonzero(bad)[0])
+                    raise CalibrationError(
+                        f"{label}: row {row + 2}, column {name!r}: "
+                        f"{str(df[name].iloc[row])!r} is not a finite number; a row of "
+                        "measured points needs its position (fix or remove that row)"
+                    )
+                y[~touch, k] = values[~touch] * scale
         return y
     plain = [c for c in columns if re.fullmatch(r"[xyz](_(mm|m|um))?", c)]
     if plain:
@@ -244,6 +315,21 @@ def _positions(df: pd.DataFrame, columns, label: str) -> np.ndarray:
             name, scale = _pick(df, label, [f"p{j}_{axis}"], None)
             y[:, j - 1, k] = _numbers(df, name, label) * scale
     return y
+
+
+def _contact_cells(df: pd.DataFrame, column: str, label: str, touch) -> None:
+    """Refuse a contact row with a position in `column` (its cells are empty or 0)."""
+    values = pd.to_numeric(df.loc[touch, column].astype(str).str.strip(), errors="coerce")
+    given = values.to_numpy(dtype=float)
+    bad = np.isfinite(given) & (given != 0)
+    text = df.loc[touch, column].astype(str).str.strip().str.lower()
+    bad |= ~np.isfinite(given) & ~text.isin(_GAPS).to_numpy()
+    if bad.any():
+        row = int(np.flatnonzero(touch)[np.flatnonzero(bad)[0]])
+        raise CalibrationError(
+            f"{label}: row {row + 2}, column {column!r}: a contact row (a fixed point or a "
+            "plane) has no measured position; leave its x, y, z cells empty"
+        )
 
 
 _GAPS = ("", "nan", "na", "n/a", "null", "none", "-")
@@ -370,8 +456,12 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
             for k, axis in enumerate("xyz"):
                 data[f"{tip}_{axis}_mm"] = points[:, j, k] * 1e3
     elif measurements.positions.ndim == 2:
+        touch = _contact_rows(measurements)
         for k, axis in enumerate("xyz"):
-            data[f"{axis}_mm"] = points[:, 0, k] * 1e3
+            column = points[:, 0, k] * 1e3
+            if touch is not None:  # a contact row has no measured position: empty cells
+                column = np.where(touch, np.nan, column)
+            data[f"{axis}_mm"] = column
     else:
         for j in range(points.shape[1]):
             for k, axis in enumerate("xyz"):
@@ -381,6 +471,13 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
         for k, c in enumerate(("qw", "qx", "qy", "qz")):
             data[c] = quat[:, k]
     sigma = measurements.sigma
+    if measurements.contact:  # a plane's x, y not measured (inf): its σ is its z's
+        sigma = np.where(np.isinf(sigma), sigma[:, 2:3], sigma)
+    if not np.all(np.isfinite(sigma)):
+        raise CalibrationError(
+            "some coordinates were not measured (sigma inf) outside contact sessions; the "
+            "CSV format has no cell for that yet: write contact sessions, or every coordinate"
+        )
     if np.any(sigma > 0):
         if np.all(sigma == sigma[:, :1]):
             data["sigma_mm"] = sigma[:, 0] * 1e3
@@ -388,9 +485,19 @@ def write_csv(path, measurements: Measurements, robot: Robot) -> None:
             for k, axis in enumerate("xyz"):
                 data[f"sigma_{axis}_mm"] = sigma[:, k] * 1e3
     if measurements.session is not None:
+        if measurements.contact:
+            kinds = [measurements.contact.get(s, "") for s in measurements.session.tolist()]
+            data = {CONTACT_COLUMN: kinds, **data}
         data = {"session": measurements.session, **data}
     text = pd.DataFrame(data).to_csv(index=False, float_format="%.17g", lineterminator="\n")
     write_atomic(path, text)
+
+
+def _contact_rows(measurements: Measurements) -> np.ndarray | None:
+    """(N,) bool: the rows of contact sessions, or None without."""
+    if not measurements.contact or measurements.session is None:
+        return None
+    return np.isin(measurements.session, list(measurements.contact))
 
 
 def _pick(df: pd.DataFrame, label: str, bases, joint) -> tuple[str, float]:

@@ -17,7 +17,9 @@ def broadcast_sigma(sigma, n: int) -> np.ndarray:
     """Noise σ as an (n, 3) array, m.
 
     Accepts a scalar (every coordinate), 3 values (per axis x, y, z), n values (per pose,
-    isotropic; with n = 3 three values are read per axis) or an (n, 3) array.
+    isotropic; with n = 3 three values are read per axis) or an (n, 3) array. ``inf``
+    means the coordinate was not measured (a touch probe on a plane measures only the
+    coordinate along its normal): its weight in a fit is 0.
     """
     try:
         arr = np.asarray(sigma, dtype=float)
@@ -29,9 +31,11 @@ def broadcast_sigma(sigma, n: int) -> np.ndarray:
             f"noise sigma {sigma!r} does not fit {n} poses; give a number, 3 values (x, y, z), "
             "one per pose or (N, 3), in m"
         ) from None
-    if not np.all(np.isfinite(out)) or np.any(out < 0):
-        raise CalibrationError("noise sigma must be finite and non-negative (m)")
-    stated = out[out > 0]
+    if np.any(np.isnan(out)) or np.any(out < 0):
+        raise CalibrationError(
+            "noise sigma must be non-negative (m), or inf for a coordinate not measured"
+        )
+    stated = out[(out > 0) & np.isfinite(out)]
     lo, hi = SIGMA_RANGE  # defined below: read at call time
     if stated.size and (stated.min() < lo or stated.max() > hi):
         bad = stated.min() if stated.min() < lo else stated.max()
@@ -72,6 +76,17 @@ class Measurements:
         probe) re-mounted between sessions: any labels of letters, digits, ``_`` and ``-``
         (they name the sessions' frames, ``base_x@LABEL``). `casecal.identify` fits one
         robot to all of them, with a base frame per session. None: one session.
+    contact : dict of str to str, optional
+        Sessions measured without a tracker, by contact (`casecal.identification.contact`):
+        label -> ``"point"`` (the tool tip held in one fixed point, a sphere or cone, in
+        many orientations: its position there is (0, 0, 0) in the session's own frame) or
+        ``"plane"`` (a touch probe touching one plane: only the coordinate along the
+        plane's normal is measured, 0, and σ of x and y is inf). Their rows carry no
+        measured position: give 0 or NaN there; they are stored as 0, with σ inf where
+        not measured. Other sessions are ordinary measured points.
+
+    A coordinate whose σ is inf was not measured: its position may be NaN (stored as 0)
+    and it weighs nothing in a fit.
     """
 
     q: np.ndarray
@@ -80,6 +95,7 @@ class Measurements:
     orientations: np.ndarray | None = None
     orientation_sigma: float | None = None
     session: np.ndarray | None = None
+    contact: dict | None = None
 
     def __post_init__(self) -> None:
         q, _ = check_joint_values(self.q, np.shape(self.q)[-1] if np.ndim(self.q) else 0)
@@ -94,9 +110,23 @@ class Measurements:
                 f"measured positions have shape {y.shape}; expected ({q.shape[0]}, 3) for one "
                 f"point per pose or ({q.shape[0]}, m, 3) for m points"
             )
+        sigma = broadcast_sigma(self.sigma, q.shape[0])
+        session = None if self.session is None else _session_labels(self.session, q.shape[0])
+        contact = _contact(self.contact, session)
+        if contact:
+            y, sigma = _contact_rows(y, sigma, session, contact, self.orientations)
+        # a coordinate not measured (σ inf) has no position: stored as 0, so that no NaN
+        # reaches a fit (its weight there is 0)
+        unmeasured = np.broadcast_to(np.isinf(sigma)[:, None, :], y.reshape(len(q), -1, 3).shape)
+        if np.any(unmeasured):
+            y = np.where(unmeasured.reshape(y.shape), 0.0, y)
+            if np.all(unmeasured):
+                raise CalibrationError(
+                    "every coordinate's sigma is inf (not measured): there is nothing to fit; "
+                    "give the measured coordinates their sigma (m)"
+                )
         if not np.all(np.isfinite(y)):
             raise CalibrationError("measured positions contain NaN or inf; remove those rows")
-        sigma = broadcast_sigma(self.sigma, q.shape[0])
         values = [("q", q), ("positions", y), ("sigma", sigma)]
         if self.orientations is not None:
             try:
@@ -118,11 +148,17 @@ class Measurements:
             if not (np.isfinite(sd) and sd >= 0):
                 raise CalibrationError("orientation sigma must be finite and non-negative (rad)")
             object.__setattr__(self, "orientation_sigma", sd)
-        if self.session is not None:
-            values.append(("session", _session_labels(self.session, q.shape[0])))
+        if session is not None:
+            values.append(("session", session))
         for name, value in values:
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        object.__setattr__(self, "contact", contact or None)
+
+    @property
+    def measured(self) -> np.ndarray:
+        """(N, 3) bool: the coordinates measured (σ not inf), shared by a pose's points."""
+        return ~np.isinf(self.sigma)
 
     @property
     def n_poses(self) -> int:
@@ -155,7 +191,15 @@ class Measurements:
             None if self.orientations is None else self.orientations[index],
             self.orientation_sigma,
             None if self.session is None else self.session[index],
+            self._contact_of(None if self.session is None else self.session[index]),
         )
+
+    def _contact_of(self, session) -> dict | None:
+        """`contact` of the sessions left in `session` (None if none)."""
+        if not self.contact or session is None:
+            return None
+        left = set(session.tolist())
+        return {k: v for k, v in self.contact.items() if k in left} or None
 
     def concat(self, other: Measurements) -> Measurements:
         """These measurements followed by `other`'s (same robot and kind)."""
@@ -180,7 +224,89 @@ class Measurements:
             orient,
             self.orientation_sigma,
             None if self.session is None else np.concatenate([self.session, other.session]),
+            _joined_contact(self.contact, other.contact),
         )
+
+
+CONTACT_KINDS = ("point", "plane")
+"""What a contact session measures: a fixed point, or a plane (`Measurements.contact`)."""
+
+
+def _joined_contact(a: dict | None, b: dict | None) -> dict | None:
+    a, b = a or {}, b or {}
+    clash = [k for k in a if k in b and a[k] != b[k]]
+    if clash:
+        raise CalibrationError(
+            f"session {clash[0]!r} is a {a[clash[0]]} in one part and a {b[clash[0]]} in the "
+            "other; give each session one kind"
+        )
+    return {**a, **b} or None
+
+
+def _contact(contact, session) -> dict:
+    """`contact` checked: label -> kind, for labels `session` has."""
+    if contact is None or (hasattr(contact, "__len__") and len(contact) == 0):
+        return {}
+    if not hasattr(contact, "items"):
+        raise CalibrationError(
+            f"contact must map session labels to 'point' or 'plane', e.g. "
+            f"{{'P1': 'plane'}}, not {contact!r}"
+        )
+    if session is None:
+        raise CalibrationError(
+            "contact names sessions, but the measurements have no session labels; give "
+            "session= (one label per pose) too"
+        )
+    known = dict.fromkeys(session.tolist())
+    out = {}
+    for label, kind in contact.items():
+        if label not in known:
+            raise CalibrationError(
+                f"contact names session {label!r}, which no pose has; the sessions are "
+                f"{', '.join(map(str, known))}"
+            )
+        if kind not in CONTACT_KINDS:
+            raise CalibrationError(
+                f"contact session {label!r} is {kind!r}; give 'point' (the tool tip held in "
+                "one fixed point) or 'plane' (a probe touching a plane)"
+            )
+        out[str(label)] = str(kind)
+    return out
+
+
+def _contact_rows(y, sigma, session, contact, orientations):
+    """Positions and σ with the contact sessions' rows as they are: 0 where measured,
+    and σ inf for a plane's x and y (not measured)."""
+    if y.ndim == 3 and y.shape[1] != 1:
+        raise CalibrationError(
+            f"contact sessions measure one point (the tool tip) per pose, but the positions "
+            f"have {y.shape[1]} per pose; give contact data of one point"
+        )
+    if orientations is not None:
+        raise CalibrationError(
+            "contact sessions measure no orientation; give orientations=None with contact"
+        )
+    y = np.array(y, dtype=float)
+    sigma = sigma.copy()
+    flat = y.reshape(len(y), 3)
+    for label, kind in contact.items():
+        rows = session == label
+        given = flat[rows]
+        if np.any(np.isfinite(given) & (given != 0)):
+            raise CalibrationError(
+                f"contact session {label!r} ({kind}) has measured positions that are not 0; "
+                "a contact row has no measured position (the fixed point or the plane is its "
+                "frame's origin): leave x, y, z empty (NaN) or 0"
+            )
+        flat[rows] = 0.0
+        if kind == "plane":
+            sigma[rows, :2] = np.inf  # only the coordinate along the normal is measured
+        elif np.any(np.isinf(sigma[rows])):
+            raise CalibrationError(
+                f"fixed-point session {label!r} has a coordinate with sigma inf: a fixed "
+                "point is measured in x, y and z; give its sigma (m)"
+            )
+    return flat.reshape(y.shape), sigma
 
 
 def _session_labels(session, n: int) -> np.ndarray:
@@ -333,3 +459,120 @@ def _frame(value, what: str) -> Frame:
     if len(frame.xyz) != 3 or len(frame.rpy) != 3 or not np.all(np.isfinite(values)):
         raise CalibrationError(f"{what}: xyz and rpy need 3 finite numbers each (m, rad)")
     return frame
+
+
+CONTACT_TOLERANCE = 1e-12
+"""How close (m) `simulate_contact` puts a simulated tip onto its contact."""
+
+
+def simulate_contact(
+    true_robot: Robot,
+    q,
+    contact: dict,
+    session,
+    frames=None,
+    noise=0.0,
+    seed=None,
+) -> Measurements:
+    """Measurements of contact sessions (a fixed point, a plane) of `true_robot`.
+
+    Each pose of a contact session is moved, by the least change of its joint values
+    (Gauss-Newton on the true robot's tip), until the tip touches its session's point or
+    plane; the returned `Measurements.q` are those moved poses, and their positions 0 (a
+    contact measures no position). The noise is where the tip touched: a fixed point's
+    tip lands at a Gaussian offset of σ per axis from the point, a plane's at σ along
+    its normal. Poses of sessions not in `contact` are measured points (`simulate`).
+
+    Parameters
+    ----------
+    true_robot : Robot
+        A serial robot without inputs or couplings.
+    q : array-like, shape (N, dof)
+        Poses near the contacts, rad (R) or m (P): e.g. the wrist turned about a tip
+        held near the point, or poses spread over the plane.
+    contact : dict of str to {"point", "plane"}
+        Which sessions are contacts (`Measurements.contact`).
+    session : array-like of str, shape (N,)
+        Each pose's session.
+    frames : dict of str to Frame or (xyz, rpy), optional
+        Each session's frame: the robot's base in it, m and rad. A fixed point is that
+        frame's origin, a plane its z = 0 plane (normal: its z axis). Default: the
+        robot's base.
+    noise : float
+        σ, m.
+    seed : int, numpy Generator or None
+
+    Returns
+    -------
+    Measurements
+        With `contact`; σ of a plane's x and y inf (not measured).
+
+    Raises
+    ------
+    CalibrationError
+        A pose whose tip cannot be brought onto its contact from where it is.
+
+    Examples
+    --------
+    >>> labels = np.repeat(["P1", "S"], 60)                                 # doctest: +SKIP
+    >>> meas = simulate_contact(true, q, {"P1": "plane", "S": "point"}, labels,
+    ...                         frames={"P1": plane_frame, "S": point_frame}, noise=2e-5)
+    """
+    from ..design.poses import rng_from
+
+    if true_robot.is_tree or true_robot.inputs or true_robot.coupling is not None:
+        raise CalibrationError(
+            "simulate_contact takes a serial robot without inputs or joint couplings"
+        )
+    q2, _ = check_joint_values(q, true_robot.dof)
+    n = q2.shape[0]
+    labels = _session_labels(session, n)
+    kinds = _contact(contact, labels)
+    try:
+        sigma_value = float(noise)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"noise {noise!r}: give one σ in m") from None
+    sigma = broadcast_sigma(sigma_value, n)
+    if not np.all(np.isfinite(sigma)):
+        raise CalibrationError("noise sigma of a simulation must be finite (m)")
+    rng = rng_from(seed)
+    offsets = rng.normal(size=(n, 3)) * sigma  # where each tip touches, or its noise
+    q2 = q2.copy()
+    positions = np.zeros((n, 3))
+    for robot, rows in _session_robots(true_robot, n, labels, frames, None):
+        label = str(labels[rows[0]])
+        kind = kinds.get(label)
+        if kind is None:  # a measured session: points with noise
+            positions[rows] = robot.measured_points(q2[rows])[:, 0, :] + offsets[rows]
+            continue
+        axes = slice(None) if kind == "point" else slice(2, 3)
+        q2[rows] = _onto(robot, q2[rows], offsets[rows], axes, label, rows)
+    meas_sigma = sigma.copy()
+    return Measurements(q2, positions, meas_sigma, session=labels, contact=kinds)
+
+
+def _onto(robot: Robot, q: np.ndarray, target: np.ndarray, axes: slice, label, rows):
+    """`q` moved by least change until the tip's coordinates `axes` in `robot`'s frame
+    equal `target`'s (Gauss-Newton, central-difference Jacobian)."""
+    h = 1e-6
+    for _ in range(60):
+        f = robot.measured_points(q)[:, 0, :]
+        r = (target - f)[:, axes]  # (n, c)
+        if np.max(np.abs(r)) < CONTACT_TOLERANCE:
+            return q
+        J = np.empty((len(q), r.shape[1], q.shape[1]))
+        for j in range(q.shape[1]):
+            step = np.zeros(q.shape[1])
+            step[j] = h
+            up = robot.measured_points(q + step)[:, 0, :]
+            down = robot.measured_points(q - step)[:, 0, :]
+            J[:, :, j] = ((up - down) / (2 * h))[:, axes]
+        # least change: dq = Jᵀ (J Jᵀ)⁻¹ r per pose
+        JJt = J @ np.swapaxes(J, 1, 2)
+        dq = np.einsum("nij,ni->nj", J, np.linalg.solve(JJt, r[:, :, None])[:, :, 0])
+        q = q + dq
+    bad = int(rows[int(np.argmax(np.max(np.abs(r), axis=1)))])
+    raise CalibrationError(
+        f"pose {bad} of contact session {label!r} cannot be brought onto its contact (the "
+        f"tip stays {np.max(np.abs(r)) * 1e3:.3g} mm off): give poses whose tips lie near it"
+    )

@@ -35,7 +35,10 @@ def display_unit(name: str) -> tuple[str, float]:
     return facts.shown, facts.factor
 
 
-def _rms(residuals: np.ndarray) -> float:
+def _rms(residuals: np.ndarray, unmeasured=None) -> float:
+    if unmeasured is not None and unmeasured.shape == residuals.shape:
+        n = max(int(np.count_nonzero(~unmeasured)), 1)
+        return float(np.sqrt(3.0 * np.sum(residuals**2) / n))
     return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))))
 
 
@@ -129,6 +132,10 @@ class Calibration:
         (`casecal.identification.sessions.SessionFit`). `robot` has the first session's
         frames; `nominal` has a frame per session, all at the nominal ones. Empty for one
         session.
+    unmeasured : ndarray of bool, shape (N·m, 3), optional
+        True for coordinates not measured (σ inf: a plane's x and y, see
+        `casecal.identification.contact`); their residuals are 0 and count nowhere. None
+        when every coordinate was measured.
     """
 
     method: str
@@ -166,6 +173,7 @@ class Calibration:
     still_joints: tuple[str, ...] = ()
     measured: str = "points"
     sessions: dict = field(default_factory=dict)
+    unmeasured: np.ndarray | None = None
 
     @property
     def success(self) -> bool:
@@ -224,8 +232,9 @@ class Calibration:
 
     @property
     def rms(self) -> float:
-        """RMS position error after calibration, m: ``sqrt(mean |r_i|²)``."""
-        return _rms(self.residuals)
+        """RMS position error after calibration, m: ``sqrt(mean |r_i|²)`` (with coordinates
+        not measured, √3 × the RMS of the measured ones)."""
+        return _rms(self.residuals, self.unmeasured)
 
     @property
     def max_error(self) -> float:
@@ -235,7 +244,7 @@ class Calibration:
     @property
     def rms_before(self) -> float:
         """RMS position error of the nominal robot, m."""
-        return _rms(self.residuals_before)
+        return _rms(self.residuals_before, self.unmeasured)
 
     @property
     def max_error_before(self) -> float:
@@ -264,7 +273,10 @@ class Calibration:
     @property
     def dof_residual(self) -> int:
         """Residual degrees of freedom: measured coordinates − k."""
-        rows = self.residuals.size + (
+        points = self.residuals.size
+        if self.unmeasured is not None and self.unmeasured.shape == self.residuals.shape:
+            points = int(np.count_nonzero(~self.unmeasured))
+        rows = points + (
             0 if self.orientation_residuals is None else self.orientation_residuals.size
         )
         return rows - len(self.estimated)

@@ -91,6 +91,11 @@ def compare_models(
     -------
     ModelComparison
     """
+    if getattr(measurements, "contact", None):
+        raise CalibrationError(
+            "comparing models on contact sessions (fixed points, planes) is not supported "
+            "yet: their held-out errors are not positions; compare on measured points"
+        )
     if not models:
         raise CalibrationError("compare_models needs at least one model")
     n = measurements.n_poses

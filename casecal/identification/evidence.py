@@ -29,7 +29,9 @@ STILL = {"R": np.radians(1.0), "P": 1e-3}
 """A joint whose values span less than this (1°, 1 mm) in the data barely moves."""
 
 
-def blind_only_here(problem: Problem, robot: Robot, estimated, held_for_noise) -> tuple[str, ...]:
+def blind_only_here(
+    problem: Problem, robot: Robot, estimated, held_for_noise, free=()
+) -> tuple[str, ...]:
     """Parameters blind at the measured poses that poses across the joint ranges would see.
 
     Parameters
@@ -42,7 +44,23 @@ def blind_only_here(problem: Problem, robot: Robot, estimated, held_for_noise) -
     estimated, held_for_noise : sequence of str
         The estimated parameters, and those held because the noise hides them (tested
         elsewhere).
+    free : sequence of str
+        Parameters outside `problem.names` (in its kernel) that poses across the joint
+        ranges would estimate too: a contact session's frame parameters the data cannot
+        see, when it is the first session, whose frame is the robot's base (what only
+        moves the whole robot is no more seen across the joint ranges than here).
     """
+    if free:
+        names = list(problem.names)
+        problem = problem.restricted([*names, *free])
+        held = [n for n in names if n not in estimated and n not in held_for_noise]
+        q_work = workspace_poses(robot)
+        if q_work is None or not held:
+            return ()
+        J = workspace_jacobian(robot, q_work, problem.names, problem)
+        prefer = [*free, *estimated]
+        elsewhere = analyse(J, problem.names, q_work.shape[0], prefer=prefer).base_parameters
+        return tuple(n for n in held if n in elsewhere)
     names = list(problem.names)
     q_work = workspace_poses(robot)
     held = [n for n in names if n not in estimated and n not in held_for_noise]
@@ -51,6 +69,22 @@ def blind_only_here(problem: Problem, robot: Robot, estimated, held_for_noise) -
     J = workspace_jacobian(robot, q_work, names, problem)  # at `robot`'s parameters
     elsewhere = analyse(J, names, q_work.shape[0], prefer=list(estimated)).base_parameters
     return tuple(n for n in held if n in elsewhere)
+
+
+def gauge_bound(problem: Problem, robot: Robot, estimated, free, candidates) -> tuple[str, ...]:
+    """Those of `candidates` that, across the joint ranges, only move the robot as a
+    whole once the `free` frame parameters are free (as a contact session's first frame
+    is, which its data cannot see): no error of theirs shows anywhere, so there is
+    nothing for the data to determine (`blind_only_here`'s `free`)."""
+    q_work = workspace_poses(robot)
+    if q_work is None or not free or not candidates:
+        return ()
+    names = [*problem.names, *(n for n in free if n not in problem.names)]
+    wide = problem.restricted(names)
+    J = workspace_jacobian(robot, q_work, names, wide)
+    prefer = [*free, *estimated]
+    seen = analyse(J, names, q_work.shape[0], prefer=prefer).base_parameters
+    return tuple(n for n in candidates if n not in seen)
 
 
 def still_joints(q: np.ndarray, robot: Robot) -> tuple[str, ...]:
@@ -101,6 +135,7 @@ def outside_gain(problem: Problem, estimated) -> Outside:
     extra = [names.index(n) for n in base if n not in estimated]
     if not extra:
         return Outside()
+
     inside = linear.columns(est).solve()[1] if est else 0.0
     gain = linear.columns(est + extra).solve()[1] - inside
     alone = {names[k]: linear.columns([*est, k]).solve()[1] - inside for k in extra}

@@ -13,14 +13,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.parameters import unit
 from .audit import Facts, predicted_rms, smoothness
-from .evidence import blind_only_here, outside_gain, still_joints
+from .evidence import blind_only_here, gauge_bound, outside_gain, still_joints
 from .lack_of_fit import lack_of_fit
 from .linalg import Reduction
 from .outliers import outlier_poses
 from .problem import Problem
 from .rank import held_gain
-from .rounds import Outcome
+from .rounds import Outcome, measured_weights
 from .solvers import ROUNDING, floor_cost
 from .uncertainty import uncertainty
 
@@ -50,7 +51,17 @@ class Gathered:
 
 
 def gather(
-    make, robot, start, reference, names, out: Outcome, settings, e0: float, e_before: float
+    make,
+    robot,
+    start,
+    reference,
+    names,
+    out: Outcome,
+    settings,
+    e0: float,
+    e_before: float,
+    gauge=(),
+    at_size: bool = False,
 ) -> Gathered:
     """Measure the `Facts` of a fit (module doc).
 
@@ -70,6 +81,14 @@ def gather(
     settings : casecal.identification.rounds.Settings
     e0, e_before : float
         RMS error at the start and of `reference`, m.
+    gauge : sequence of str
+        Frame parameters of the robot's base not asked for because the data cannot see
+        them (a contact session's, the first session's): free across the joint ranges
+        too (`casecal.identification.evidence.blind_only_here`).
+    at_size : bool
+        Contact sessions only: what freeing parameters would gain is judged at the
+        robot's size, which contacts cannot see: held parameters by
+        `Reduction.decrease_at_size`, those not asked for without the lengths.
     """
     robust = settings.loss != "linear"
     outside = _outside(robot, names)
@@ -98,7 +117,11 @@ def gather(
         make(out.robot, names=out.estimated), settings.w, settings.known, refit=not robust
     )
     inliers = _inliers(make(out.robot, names=out.estimated), outliers) if robust else None
-    unasked = outside_gain(final.restricted([*out.estimated, *outside]), out.estimated)
+    # contacts alone: the lengths not asked for are the robot's size (module doc of
+    # casecal.identification.contact); freeing them all would free the size, which
+    # explains any residual of contacts, so the test frees the others
+    tested = [n for n in outside if unit(n) != "m"] if at_size else outside
+    unasked = outside_gain(final.restricted([*out.estimated, *tested]), out.estimated)
     keep = np.setdiff1d(np.arange(len(q)), outliers) if robust else slice(None)
     n_prior = int(np.sum(prior_w > 0))
     workspace = predicted_rms(out.robot, reference, out.estimated, cov)
@@ -112,6 +135,8 @@ def gather(
             keep if robust else None,  # a robust fit judged on its inliers, unweighted
         )
     )
+    # what only moves the whole robot once the contact frame it is seen in is free
+    gauge_free = gauge_bound(final, out.robot, out.estimated, gauge, out.unsupported)
     facts = Facts(
         solver_status=out.solver_status,
         solver_message=out.message,
@@ -123,18 +148,20 @@ def gather(
         dof=(inliers[1] if inliers else linear.rows - len(out.estimated)) + n_prior,
         rms_start=e0,
         rms_before=e_before,
-        rms_final=point_rms(point_residuals),
+        rms_final=point_rms(point_residuals, est._unmeasured),
         settled=out.settled,
         rounds=out.rounds,
         predicted_rms=None if workspace is None else workspace[0],
         correction_rms=0.0 if workspace is None else workspace[1],
-        noise_rms=float(np.sqrt(np.mean(1.0 / settings.w**2)))
+        noise_rms=float(np.sqrt(np.mean(1.0 / measured_weights(settings.w) ** 2)))
         if settings.known
-        else point_rms(point_residuals) / np.sqrt(3.0),
-        n_points=point_residuals.size // 3,
+        else point_rms(point_residuals, est._unmeasured) / np.sqrt(3.0),
+        n_points=point_residuals.size // 3
+        if est._unmeasured is None
+        else np.count_nonzero(~est._unmeasured) / 3,
         n_estimated=len(out.estimated),
         one_shot=settings.method == "svd",
-        unsupported=out.unsupported,
+        unsupported=tuple(n for n in out.unsupported if n not in gauge_free),
         held=tuple(out.pruned),
         smoothness=smoothness(q[keep], point_residuals[keep]),
         held_gain=held_gain(
@@ -142,6 +169,7 @@ def gather(
             names,
             out.estimated,
             out.pruned,
+            at_size=at_size,
         )
         if out.pruned
         else 0.0,
@@ -151,6 +179,7 @@ def gather(
             out.start_robot if settings.method == "svd" else out.robot,
             out.estimated,
             out.pruned,
+            free=tuple(gauge),
         ),
         still=still_joints(q, robot),
         outside_gain=unasked.gain,
@@ -199,10 +228,19 @@ def _inliers(problem: Problem, outliers) -> tuple[float, int, float, int]:
     x0 = np.zeros(len(problem.names))
     keep = np.setdiff1d(np.arange(len(problem.q)), outliers)
     r = problem.residual(x0).reshape(len(problem.q), -1)[keep].ravel()
-    rms = point_rms(problem.point_residuals(x0)[keep])
+    unmeasured = None if problem._unmeasured is None else problem._unmeasured[keep]
+    rms = point_rms(problem.point_residuals(x0)[keep], unmeasured)
     return 0.5 * float(r @ r), r.size - len(x0), rms, len(outliers)
 
 
-def point_rms(point_residuals: np.ndarray) -> float:
-    """RMS length of point residuals (..., 3), m."""
+def point_rms(point_residuals: np.ndarray, unmeasured: np.ndarray | None = None) -> float:
+    """RMS length of point residuals (..., 3), m.
+
+    With coordinates not measured (`unmeasured`, True where σ is inf; their residuals
+    0), √3 times the RMS of the measured coordinates: the length a point's error would
+    have if every coordinate were measured alike.
+    """
+    if unmeasured is not None:
+        n = np.count_nonzero(~np.asarray(unmeasured))
+        return float(np.sqrt(3.0 * np.sum(np.square(point_residuals)) / max(n, 1)))
     return float(np.sqrt(np.mean(np.sum(np.reshape(point_residuals, (-1, 3)) ** 2, axis=1))))

@@ -37,15 +37,17 @@ from ..model.robot import Robot
 from .analysis import represent, selection
 from .audit import audit
 from .calibration import STATUS_MESSAGES, Calibration
+from .contact import check_robot as check_contact_robot
+from .contact import plausible_error
 from .facts import gather, point_rms
 from .problem import Problem
 from .reference import FALLBACK_NOTE, frame_parameters, frames_fitted
 from .rounds import LOSSES, Settings, fit_in_rounds
 from .scale import door, with_size_check
+from .sessions import contact_held, session_robot, with_indicators
 from .sessions import door as session_door
 from .sessions import fitted as fitted_sessions
 from .sessions import resolve as resolve_sessions
-from .sessions import session_robot, with_indicators
 from .sessions import start as session_start
 from .solvers import SOLVERS
 from .start import FitFrame, choose_frame, partial_base_start
@@ -155,6 +157,13 @@ def identify(
     loss_scale = _check_options(method, bounds, prior, loss, loss_scale)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
+    if measurements.contact:
+        if robot.coupling is not None:
+            raise CalibrationError(
+                "contact sessions (a fixed point, a plane) are not supported for a robot "
+                "with coupled joints yet"
+            )
+        check_contact_robot(robot, measurements)
     if robot.coupling is not None:
         return _coupled(
             robot,
@@ -174,6 +183,7 @@ def identify(
             per_session=per_session,
         )
     sessions = resolve_sessions(robot, measurements, per_session)
+    held = []
     robot = session_robot(robot, sessions)  # a frame per session; itself for one session
     names = _selection(robot, parameters, sessions)
     if measurements.q.shape[1] not in (robot.dof, robot.n_inputs):
@@ -212,8 +222,11 @@ def identify(
             "bound or weigh the joint, tool and point parameters only"
         )
     sigma = measurements.sigma if noise is None else broadcast_sigma(noise, q.shape[0])
-    known = bool(np.all(sigma > 0))
-    if not known and np.any(sigma > 0):
+    measured = ~np.isinf(measurements.sigma) & ~np.isinf(sigma)  # σ inf: not measured
+    if not np.all(measured):
+        sigma = np.where(measured, sigma, np.inf)  # a plane's x, y stay not measured
+    known = bool(np.all(sigma[measured] > 0))
+    if not known and np.any(sigma[measured] > 0):
         raise CalibrationError(
             "noise sigma is zero for some coordinates and not others; give every coordinate "
             "its sigma (> 0), or none (0 everywhere) to weigh all alike"
@@ -224,6 +237,9 @@ def identify(
             "measurements with sigma"
         )
     w = 1.0 / sigma if known else np.ones_like(sigma)
+    if not np.all(measured):  # weight 0, and no position (stored 0) reaches a residual
+        w = np.where(measured, w, 0.0)
+        y = np.where(measured[:, None, :], y, 0.0)
     w_rot = _orientation_weight(measurements, orientation_sigma, known, w)
 
     if sessions is None:
@@ -243,9 +259,11 @@ def identify(
     start, start_note = robot, frame_note
     if sessions is not None:
         start, start_note = session_start(robot, q, y, w, sessions)
+        held = contact_held(start, sessions)  # blind frame parameters: not estimated
+        names = [n for n in names if n not in held]
     elif frame.is_identity:
         start, start_note = partial_base_start(robot, lambda r, n: make(r, names=n), names)
-    e0 = point_rms(make(start, names=names).point_residuals(np.zeros(len(names))))
+    e0 = _rms_of(make(start, names=names), len(names))
     settings = Settings(
         method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior, progress
     )
@@ -253,7 +271,7 @@ def identify(
     frames = frame_parameters(names, robot)
     if reference is start and frames and len(frames) < len(names):
         start_note = f"{start_note} {FALLBACK_NOTE}".strip()
-    e_before = point_rms(make(reference, names=names).point_residuals(np.zeros(len(names))))
+    e_before = _rms_of(make(reference, names=names), len(names))
     if method != "svd" and not bounds and not prior and reference is not start:
         # the fitted base is a start nearer the minimum. Not the tool or the reflectors:
         # moved off the nominal, a tool point on the flange axis would make wrist
@@ -263,10 +281,17 @@ def identify(
         start = start.with_parameters(
             {n: reference.parameters[n] for n in names if n.startswith("base_")}
         )
-        e0 = point_rms(make(start, names=names).point_residuals(np.zeros(len(names))))
-    out = fit_in_rounds(make, start, names, settings, e_before)
+        e0 = _rms_of(make(start, names=names), len(names))
+    e_rounds = e_before
+    if sessions is not None and sessions.kinds:  # contacts hide the robot's error
+        e_rounds = max(e_before, plausible_error(start, names))
+    out = fit_in_rounds(make, start, names, settings, e_rounds)
 
-    got = gather(make, robot, start, reference, names, out, settings, e0, e_before)
+    gauge = [n for n in held if "@" not in n]  # the first session's: the robot's base
+    # contacts alone see no size: their points are 0, so shrinking the robot explains
+    # any residual; the tests of what freeing parameters would gain are at its size
+    at_size = sessions is not None and all(sessions.kinds) and bool(sessions.kinds)
+    got = gather(make, robot, start, reference, names, out, settings, e0, e_before, gauge, at_size)
     est, x0 = got.estimated, np.zeros(len(out.estimated))
     point_residuals = est.point_residuals(x0)
     checks = with_size_check(audit(got.facts), robot, out.robot, q, y)
@@ -326,9 +351,15 @@ def identify(
         still_joints=got.facts.still,
         sessions={}
         if sessions is None
-        else fitted_sessions(calibrated, se, point_residuals, sessions),
+        else fitted_sessions(calibrated, se, point_residuals, sessions, held),
+        unmeasured=None if np.all(measured) else np.repeat(~measured, y.shape[1], axis=0),
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+def _rms_of(problem: Problem, k: int) -> float:
+    """`point_rms` of `problem` at its start, measured coordinates only."""
+    return point_rms(problem.point_residuals(np.zeros(k)), problem._unmeasured)
 
 
 def _selection(robot: Robot, parameters, sessions) -> list[str]:

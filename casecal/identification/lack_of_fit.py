@@ -106,12 +106,14 @@ def lack_of_fit(problem: Problem, joint_types: str, poses=None, seed: int = 0) -
     inside, rank_in = _explained(J, r)
     both, rank_both = _explained(np.hstack([J, X]), r)
     n_extra = rank_both - rank_in
-    dof = r.size - rank_both
+    # rows of coordinates not measured (weight 0: a plane's x, y) are no observations
+    observed = int(np.count_nonzero(problem.w_rows[:, :points]))
+    dof = observed - rank_both
     if n_extra <= 0 or dof < 2 * n_extra:
         return None
     # what the estimates' own (linearised) step leaves: the fit's cost, to rounding
     cost = 0.5 * float(r @ r) - 0.5 * inside
-    return LackOfFit(max(0.5 * (both - inside), 0.0), n_extra, cost, r.size - rank_in)
+    return LackOfFit(max(0.5 * (both - inside), 0.0), n_extra, cost, observed - rank_in)
 
 
 def _explained(A: np.ndarray, r: np.ndarray) -> tuple[float, int]:

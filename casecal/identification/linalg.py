@@ -175,6 +175,35 @@ class Reduction:
         z = Vt[keep].T @ (proj / s[keep])
         return z / norms, 0.5 * float(proj @ proj)
 
+    def decrease_at_size(self) -> float:
+        """`solve`'s cost decrease, except that where the columns can explain the whole
+        residual by shrinking the robot, that one direction is left out.
+
+        Data of contact sessions only (`casecal.identification.contact`) are 0 by
+        construction, so the model's own points are the residuals, and scaling every
+        length down (the size, which contacts cannot see) explains all of them, noise
+        included: freeing parameters that complete that direction would "lower the cost"
+        by all of it. What they could explain at the robot's size is the decrease over
+        the columns' other directions (the size direction's complement, column-scaled).
+        """
+        z, total = self.solve()
+        if self.rr <= 0 or 2.0 * total < (1.0 - SIZE_SPAN) * self.rr:
+            return total
+        Rs, norms, _ = self.scaled()
+        v = z * norms  # the size direction, scaled coordinates
+        if not np.any(v):
+            return total
+        basis = np.linalg.svd(v[None, :])[2][1:].T  # (k, k - 1): v's complement
+        A = Rs @ basis
+        U, s, _ = np.linalg.svd(A, full_matrices=False)
+        keep = s > nr_threshold(s, (self.rows, A.shape[1])) if s.size else s > 0
+        proj = U[:, keep].T @ self.Qtr
+        return 0.5 * float(proj @ proj)
+
+
+SIZE_SPAN = 1e-6
+"""Fraction of the residual's square a linear step may leave for `decrease_at_size` to
+take the columns for explaining all of it (by the robot's size)."""
 
 FOLD_ROWS = 3072
 """Rows folded per factorisation in `Reduction.folded`: the work array stays in the

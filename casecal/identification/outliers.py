@@ -64,8 +64,9 @@ def outlier_poses(
         The poses, ascending.
     """
     x0 = np.zeros(len(problem.names))
-    e2 = _squared(problem, x0, w)
-    listed = _judge(e2, known, len(x0), np.zeros(len(e2), dtype=bool))
+    counts = _measured_counts(problem)
+    e2 = _squared(problem, x0, w, counts)
+    listed = _judge(e2, known, len(x0), np.zeros(len(e2), dtype=bool), counts)
     if not refit or not x0.size or not listed.size or 2 * listed.size > len(e2):
         return tuple(int(i) for i in listed)
     full = problem.reduced(x0)  # the fit's own: memoised, no pass over the poses
@@ -76,25 +77,59 @@ def outlier_poses(
         out = np.zeros(len(e2), dtype=bool)
         out[listed] = True
         e2, x = _without(problem, w, full, listed, x)
-        again = _judge(e2, known, len(x0), out)
+        e2 = _as_three(e2, counts)
+        again = _judge(e2, known, len(x0), out, counts)
         if np.array_equal(again, listed) or not again.size or 2 * again.size > len(e2):
             break
         listed = again
     return tuple(int(i) for i in again)
 
 
-def _squared(problem: Problem, x: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Squared σ-weighted point-residual norms at `x`, shape (N, m)."""
-    return np.sum((problem.point_residuals(x) * w[:, None, :]) ** 2, axis=2)
+def _squared(problem: Problem, x: np.ndarray, w: np.ndarray, counts=None) -> np.ndarray:
+    """Squared σ-weighted point-residual norms at `x`, shape (N, m) (as χ²(3), `_as_three`,
+    where `counts` says a point has fewer measured coordinates)."""
+    e2 = np.sum((problem.point_residuals(x) * w[:, None, :]) ** 2, axis=2)
+    return e2 if counts is None else _as_three(e2, counts)
 
 
-def _judge(e2: np.ndarray, known: bool, k: int, out: np.ndarray) -> np.ndarray:
+def _measured_counts(problem: Problem) -> np.ndarray | None:
+    """(N, m): each point's measured coordinates, or None when all three are."""
+    if problem._unmeasured is None:
+        return None
+    n = len(problem.q)
+    return 3 - problem._unmeasured.reshape(n, problem.m, 3).sum(axis=2)
+
+
+def _as_three(e2: np.ndarray, counts) -> np.ndarray:
+    """`e2` of points with `counts` measured coordinates (χ²(count) for noise) as the
+    χ²(3) value of the same tail: a plane's one coordinate judged like three."""
+    if counts is None:
+        return e2
+    from scipy.special import chdtrc, chdtri
+
+    # in units of the noise the medians say (σ² unknown, or the residuals' own), so
+    # that the tails are those of the noise; back in `e2`'s units after
+    scales = [np.median(e2[counts == k]) / chdtri(k, 0.5) for k in (1, 2, 3) if np.any(counts == k)]
+    s2 = float(np.median(scales)) if scales else 0.0
+    if not s2 > 0:
+        return np.where(counts == 0, 0.0, e2)
+    out = e2.copy()
+    for k in (1, 2):
+        where = counts == k
+        if np.any(where):
+            tail = np.clip(chdtrc(k, e2[where] / s2), 1e-300, 1.0)
+            out[where] = s2 * chdtri(3, tail)
+    out[counts == 0] = 0.0
+    return out
+
+
+def _judge(e2: np.ndarray, known: bool, k: int, out: np.ndarray, counts=None) -> np.ndarray:
     """Poses of `e2` (N, m) above the limit, the noise scaled from the poses not `out`."""
     from scipy.special import chdtri  # scipy loads slowly; only fits need it
 
     n, m = e2.shape
     kept = e2[~out]
-    rows = 3 * kept.size
+    rows = 3 * kept.size if counts is None else int(counts[~out].sum())
     if rows <= k:
         return np.zeros(0, dtype=int)  # no redundancy: nothing can stand out
     # the median of the fit's residuals, which k of the rows' freedom went into, scales σ²

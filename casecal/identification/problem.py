@@ -88,6 +88,10 @@ class Problem:
         self.y = np.asarray(y, dtype=float).reshape(n, -1)  # (N, 3m)
         self.m = self.y.shape[1] // 3
         self.w = w
+        # coordinates not measured (σ inf, weight 0): their residual is 0, not the model's
+        # distance from a stored 0 (a plane's x and y)
+        unmeasured = np.asarray(w) == 0
+        self._unmeasured = np.tile(unmeasured, (1, self.m)) if np.any(unmeasured) else None
         self.names = tuple(names)
         kernel_names = tuple(kernel_names or names)
         self.columns = self.chain.columns(self.names)
@@ -179,9 +183,12 @@ class Problem:
         return p
 
     def point_residuals(self, x: np.ndarray) -> np.ndarray:
-        """Unweighted ``y - f`` of the points, shape (N, m, 3), m."""
+        """Unweighted ``y - f`` of the points, shape (N, m, 3), m; 0 where not measured."""
         f = self._evaluate("points", self.p(x))
-        return (self.y - f).reshape(len(self.q), self.m, 3)
+        r = self.y - f
+        if self._unmeasured is not None:
+            r = np.where(self._unmeasured, 0.0, r)
+        return r.reshape(len(self.q), self.m, 3)
 
     def orientation_residuals(self, x: np.ndarray) -> np.ndarray | None:
         """Unweighted ``log(R_meas R_modelᵀ)``, shape (N, 3), rad; None without data."""

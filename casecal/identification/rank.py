@@ -77,12 +77,15 @@ def chi2_quantile(level: float, dof: int) -> float:
     return float(chdtri(dof, 1.0 - level))
 
 
-def held_gain(linear: Reduction, names, estimated, held) -> float:
+def held_gain(linear: Reduction, names, estimated, held, at_size: bool = False) -> float:
     """Cost decrease (one linearised step) that freeing `held` would add to what the
     `estimated` parameters can still gain; `linear`: the weighted ``[J | r]`` of all
-    `names` at the point."""
+    `names` at the point. `at_size`: contact data only, the robot's size left out
+    (`Reduction.decrease_at_size`)."""
     est = [names.index(n) for n in estimated]
     both = [names.index(n) for n in names if n in estimated or n in held]
+    if at_size:
+        return linear.columns(both).decrease_at_size() - linear.columns(est).decrease_at_size()
     return linear.columns(both).solve()[1] - linear.columns(est).solve()[1]
 
 

@@ -138,7 +138,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         data that match the nominal robot to their noise bound no deviation below it).
     """
     if settings.known:
-        e0 = max(e0, float(np.sqrt(3 * np.mean(1.0 / settings.w**2))))
+        e0 = max(e0, float(np.sqrt(3 * np.mean(1.0 / measured_weights(settings.w) ** 2))))
     hold = start.parameters
     start_analysis = check_analysis(make(start, names=names))
     q_work = workspace_poses(start)
@@ -173,7 +173,11 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         point, lost = _release(make, point, names, settings, weights, hold, order, base, r)
         frozen.update(dict.fromkeys(lost, FROZEN))
         J_work = workspace_jacobian(point, q_work, names, full)
-        noise = float(np.sqrt(3 * np.mean(1.0 / settings.w**2))) if settings.known else None
+        noise = (
+            float(np.sqrt(3 * np.mean(1.0 / measured_weights(settings.w) ** 2)))
+            if settings.known
+            else None
+        )
         moved = deviations_between(hold, point.parameters, visible)  # rotations: a turn
         offsets = np.array([moved[n] for n in visible])
         keep, dropped = prune(
@@ -268,6 +272,12 @@ def _release(make, point, names, settings, weights, hold, order, base, r):
     return point, blind
 
 
+def measured_weights(w: np.ndarray) -> np.ndarray:
+    """The weights `w` of measured coordinates: all of them (the same array) unless some
+    are 0 (σ inf, not measured), which say nothing of the noise."""
+    return w if np.all(w > 0) else w[w > 0]
+
+
 def workspace_poses(robot: Robot):
     """Poses spread within the joint limits (fixed seed), or None without limits."""
     try:
@@ -280,7 +290,7 @@ def check_analysis(full: Problem) -> Observability:
     """Identifiability at `full`'s robot, refusing data that cannot decide it."""
     names = full.names
     obs = analyse(full.reduced(np.zeros(len(names))).R, names, full.q.shape[0])
-    n_poses, rows = full.q.shape[0], full.w_flat.size
+    n_poses, rows = full.q.shape[0], int(np.count_nonzero(full.w_flat))
     if obs.rank >= rows and len(names) > obs.rank:
         # the data, not the robot's structure, limit what can be seen
         raise CalibrationError(
@@ -309,7 +319,7 @@ def _solve_round(make, point, names, estimated, settings: Settings, weights, hol
     if settings.progress is not None:
         rows = settings.w.size  # cost → RMS per coordinate, in σ (or m) units
         # weighted residuals are in σ; back to mm with the RMS σ (1 without σ: in m)
-        scale = 1e3 * float(np.sqrt(np.mean(1.0 / settings.w**2)))
+        scale = 1e3 * float(np.sqrt(np.mean(1.0 / measured_weights(settings.w) ** 2)))
 
         def report(it: int, cost: float) -> None:
             rms = scale * np.sqrt(2.0 * cost / rows)

@@ -39,7 +39,13 @@ NAME = "robot keeps its size"
 
 
 def door(robot: Robot, measurements: Measurements) -> None:
-    """Refuse or warn about unit slips in `measurements` (`casecal.data.units.at_the_door`)."""
+    """Refuse or warn about unit slips in `measurements` (`casecal.data.units.at_the_door`),
+    on the poses whose every coordinate was measured (σ not inf)."""
+    rows = np.all(measurements.measured, axis=1)
+    if not np.all(rows):
+        if np.count_nonzero(rows) < 3:  # too few whole points to see a unit by
+            return
+        measurements = measurements.take(rows)
     at_the_door(robot, measurements.q, measurements.points)
 
 

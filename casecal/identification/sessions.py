@@ -14,6 +14,10 @@ columns of a session's frame are exactly zero on the other sessions' poses, and 
 covariance, the rank and the audit see all sessions at once. Each session's base starts
 from a rigid fit of the nominal robot's points to that session's measured ones; the frames
 are always estimated (where the instrument stood is no parameter one can know or hold).
+
+Contact sessions (`Measurements.contact`: a fixed point, a plane; see
+`casecal.identification.contact`) are sessions too, with their own start and the frame
+parameters they cannot see held at it.
 """
 
 from __future__ import annotations
@@ -65,6 +69,10 @@ class SessionFit:
     n_poses: int
     rms: float
     names: tuple[str, ...]
+    kind: str = ""
+    """``"point"`` or ``"plane"`` for a contact session, "" for measured points."""
+    held: tuple[str, ...] = ()
+    """The frame parameters a contact session cannot see, held at their start."""
 
 
 @dataclass(frozen=True)
@@ -74,6 +82,11 @@ class Sessions:
     labels: tuple[str, ...]
     index: np.ndarray  # (N,) each pose's session, 0 = the first
     frames: tuple[str, ...]  # the frames each session has of its own
+    kinds: tuple[str, ...] = ()  # per label: "point", "plane" (contact) or ""
+
+    def kind(self, k: int) -> str:
+        """Session `k`'s contact kind, "" for measured points."""
+        return self.kinds[k] if self.kinds else ""
 
     @property
     def indicators(self) -> np.ndarray:
@@ -116,13 +129,25 @@ def resolve(robot: Robot, measurements: Measurements, per_session) -> Sessions |
         )
     frames = ("base", "tool") if "tool" in frames else ("base",)
     labels = measurements.sessions
-    if len(labels) < 2:
+    contact = measurements.contact or {}
+    if contact and "tool" in frames:
+        raise CalibrationError(
+            "per_session=('base', 'tool') with contact sessions (a fixed point, a plane) is "
+            "not supported: a contact cannot tell a re-mounted probe from the point or the "
+            "plane; fit with per_session=('base',)"
+        )
+    if len(labels) < 2 and not contact:
         return None
     index = np.unique(measurements.session, return_inverse=True)[1]
     order = np.array([labels.index(v) for v in np.unique(measurements.session)])
     index = order[index]
     counts = np.bincount(index, minlength=len(labels))
-    few = [(labels[k], int(c)) for k, c in enumerate(counts) if c < MIN_SESSION_POSES]
+    kinds = tuple(contact.get(label, "") for label in labels) if contact else ()
+    few = [
+        (labels[k], int(c))
+        for k, c in enumerate(counts)
+        if c < MIN_SESSION_POSES and (not kinds or kinds[k] != "plane")  # a plane: its own
+    ]
     if few:
         label, count = few[0]
         raise CalibrationError(
@@ -130,7 +155,7 @@ def resolve(robot: Robot, measurements: Measurements, per_session) -> Sessions |
             f"parameters) needs at least {MIN_SESSION_POSES}, and many more to be "
             "well determined; measure more poses in it, or join it to another session"
         )
-    return Sessions(labels, index, frames)
+    return Sessions(labels, index, frames, kinds)
 
 
 def session_robot(robot: Robot, sessions: Sessions | None) -> Robot:
@@ -153,9 +178,11 @@ def with_indicators(robot: Robot, q: np.ndarray, sessions: Sessions) -> np.ndarr
 
 def door(robot: Robot, measurements: Measurements, sessions: Sessions, check) -> None:
     """Run the unit checks at the door (`check(robot, measurements)`) on each session's
-    own poses: a rigid fit of all sessions at once would see the instruments' moves."""
+    own poses: a rigid fit of all sessions at once would see the instruments' moves.
+    Contact sessions measured no points to check."""
     for k in range(len(sessions.labels)):
-        check(robot, measurements.take(sessions.index == k))
+        if not sessions.kind(k):
+            check(robot, measurements.take(sessions.index == k))
 
 
 def start(robot: Robot, q, y, w, sessions: Sessions) -> tuple[Robot, str]:
@@ -173,17 +200,28 @@ def start(robot: Robot, q, y, w, sessions: Sessions) -> tuple[Robot, str]:
     w : ndarray, shape (N, 3)
         Position weights 1/σ.
     """
+    from . import contact
+
     model = robot.measured_points(q)  # every session's frames nominal: the same robot
     values = {}
+    notes = []
+    plain = session_robot(robot, None)
     for k, label in enumerate(sessions.labels):
         rows = sessions.index == k
-        weights = np.repeat(np.mean(w[rows] ** 2, axis=1), y.shape[1])
-        R, t = rigid_fit(model[rows].reshape(-1, 3), y[rows].reshape(-1, 3), weights=weights)
-        fit = np.eye(4)
-        fit[:3, :3], fit[:3, 3] = R, t
+        kind = sessions.kind(k)
+        if kind:  # nothing measured to fit to: the point or the plane through the tips
+            fit = contact.start_frame(plain, q[rows, : robot.dof], model[rows, 0], kind, label)
+        else:
+            weights = np.repeat(np.mean(w[rows] ** 2, axis=1), y.shape[1])
+            R, t = rigid_fit(model[rows].reshape(-1, 3), y[rows].reshape(-1, 3), weights=weights)
+            fit = np.eye(4)
+            fit[:3, :3], fit[:3, 3] = R, t
         base = fit @ robot.base.matrix()
         frame = [*base[:3, 3].tolist(), *rpy_from_matrix(base[:3, :3])]
         values.update(zip(frame_names("base", label if k else ""), frame, strict=True))
+        if kind:
+            held = contact.held_names(label, label if k else "", kind, frame[3:])
+            notes.append(contact.note(label, kind, held, int(rows.sum())))
     counts = np.bincount(sessions.index, minlength=len(sessions.labels))
     shown = ", ".join(f"{label}: {c}" for label, c in zip(sessions.labels, counts, strict=True))
     own = "a base frame" if sessions.frames == ("base",) else "a base and a tool frame"
@@ -196,10 +234,47 @@ def start(robot: Robot, q, y, w, sessions: Sessions) -> tuple[Robot, str]:
         f"are named base_x@LABEL …. Each base started from a rigid fit of the nominal "
         "positions to that session's measured points."
     )
+    if sessions.kinds:
+        note = (
+            f"The poses come from {len(sessions.labels)} session"
+            f"{'s' * (len(sessions.labels) > 1)} ({shown} poses), contacts among them: one "
+            "robot was fitted to all of them, with a base frame per session (the first's, "
+            f"{first!r}, keeps the plain names base_x … and is the calibrated robot's; the "
+            "others' are base_x@LABEL …). A session of measured points started from a rigid "
+            "fit of the nominal positions to its points, a fixed point at the mean nominal "
+            "tip, a plane from one fitted through its nominal tips. " + " ".join(notes)
+        )
+        if all(sessions.kinds):
+            note += (
+                " Contacts alone see no length scale (a robot twice the size touches "
+                "planes and points twice as far away just as well): the robot's size "
+                "rests on the lengths not estimated (the tool's, as given); freeing all of "
+                "them leaves it undetermined. Add a session of measured points, or keep "
+                "the tool's lengths known."
+            )
     return robot.with_parameters(values), note
 
 
-def fitted(calibrated: Robot, standard_errors: dict, residuals, sessions: Sessions) -> dict:
+def contact_held(robot: Robot, sessions: Sessions | None) -> list[str]:
+    """The frame parameters the contact sessions cannot see (held at their start), for
+    `robot` with every session's start frame."""
+    from . import contact
+
+    if sessions is None or not sessions.kinds:
+        return []
+    by_label = {s.label: s for s in robot.sessions}
+    out = []
+    for k, label in enumerate(sessions.labels):
+        kind = sessions.kind(k)
+        if kind:
+            base = by_label[label].base if k else robot.base
+            out.extend(contact.held_names(label, label if k else "", kind, base.rpy))
+    return out
+
+
+def fitted(
+    calibrated: Robot, standard_errors: dict, residuals, sessions: Sessions, held=()
+) -> dict:
     """`Calibration.sessions`: label -> `SessionFit`, in order of appearance.
 
     Parameters
@@ -209,7 +284,9 @@ def fitted(calibrated: Robot, standard_errors: dict, residuals, sessions: Sessio
     standard_errors : dict
         Of every asked-for parameter, SI.
     residuals : ndarray, shape (N, m, 3)
-        After calibration, m.
+        After calibration, m (0 where not measured).
+    held : sequence of str
+        The contact sessions' frame parameters held at their start (`contact_held`).
     """
     out = {}
     by_label = {s.label: s for s in calibrated.sessions}
@@ -236,6 +313,8 @@ def fitted(calibrated: Robot, standard_errors: dict, residuals, sessions: Sessio
             n_poses=int(rows.sum()),
             rms=float(np.sqrt(np.mean(np.sum(e**2, axis=1)))),
             names=names,
+            kind=sessions.kind(k),
+            held=tuple(n for n in names if n in held),
         )
     return out
 

@@ -124,6 +124,12 @@ def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> V
     measurements : Measurements
         Poses not used in the calibration.
     """
+    if measurements.contact:
+        raise CalibrationError(
+            "validating on contact sessions (fixed points, planes) is not supported yet: "
+            "their held-out errors are not positions; hold out measured points, or compare "
+            "the calibrated robot's contact residuals (Calibration.residuals)"
+        )
     if nominal.sessions:  # a session fit's nominal (`Calibration.nominal`): the robot itself
         nominal = nominal.with_sessions(())
     if calibrated.sessions:
