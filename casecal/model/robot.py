@@ -147,6 +147,12 @@ class Robot:
         (`with_coupling`); None: the controller's joints are the model's. With a coupling,
         every joint value the API takes or returns is the controller's (`dof` of them),
         and `limits` bound the controller joints (`casecal.model.coupling`).
+    coupled_from : Robot or None
+        Set by `uncoupled` (the model of a coupled robot, as `identify` fits it): the
+        coupled robot, so that poses drawn for the model (`casecal.poses.uniform`: the
+        audit's, the workspace's) are the controller's mapped through the coupling, poses
+        the robot can take; not a joint box that moves a passive joint on its own. No
+        part of the kinematics, comparison or repr.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -174,6 +180,7 @@ class Robot:
     sessions: tuple = ()
     sizes: tuple = ()
     coupling: object = None
+    coupled_from: object = field(default=None, repr=False, compare=False)
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
@@ -309,7 +316,9 @@ class Robot:
         joints = tuple(
             dataclasses.replace(j, limits=r) for j, r in zip(self.joints, ranges, strict=True)
         )
-        return dataclasses.replace(self, joints=joints, coupling=None, auto_beta=False)
+        return dataclasses.replace(
+            self, joints=joints, coupling=None, coupled_from=self, auto_beta=False
+        )
 
     def recoupled(self, like: Robot) -> Robot:
         """This robot (a model `uncoupled` from `like`, e.g. calibrated) with `like`'s
@@ -320,7 +329,9 @@ class Robot:
             dataclasses.replace(j, limits=o.limits)
             for j, o in zip(self.joints, like.joints, strict=True)
         )
-        return dataclasses.replace(self, joints=joints, coupling=like.coupling, auto_beta=False)
+        return dataclasses.replace(
+            self, joints=joints, coupling=like.coupling, coupled_from=None, auto_beta=False
+        )
 
     def with_coupling(self, M, b=None, limits=None) -> Robot:
         """A new Robot whose model joints follow the controller's: ``q_model = M q + b``.
@@ -336,7 +347,12 @@ class Robot:
         limits : sequence of (float, float) or None, optional
             Only with fewer controller joints than model joints: per controller joint its
             [min, max] (rad or m) or None (a revolute joint without limits). With as many,
-            the joint rows' limits bound the controller joints, row i joint i.
+            the joint rows' limits bound the controller joints, row i joint i. With fewer
+            and none given, a robot whose joint rows carry limits (a URDF's) gives each
+            controller joint those of the model joint it alone drives (``q_i = c q_k + b``:
+            a torso's actuated joints), and the coupled joints' own limits are dropped (the
+            controller's bound them); a controller joint driving no model joint alone
+            needs `limits`. Given, they replace the joint rows' limits.
 
         Returns
         -------
@@ -357,10 +373,22 @@ class Robot:
         >>> M = np.eye(6); M[2, 1] = M[2, 2] = -1.0  # doctest: +SKIP
         >>> arm = load_robot("kr16_2").with_coupling(M)  # doctest: +SKIP
         """
-        from .coupling import make_coupling
+        from .coupling import controller_limits_of_rows, make_coupling
 
-        coupling = make_coupling(M, b, limits, self.joints, f"robot {self.name!r}")
-        return dataclasses.replace(self, coupling=coupling, auto_beta=False)
+        label = f"robot {self.name!r}"
+        joints = self.joints
+        fewer = np.ndim(M) == 2 and 0 < np.shape(M)[1] < np.shape(M)[0] == len(joints)
+        if fewer and any(j.limits is not None for j in joints):
+            # a URDF's joints all carry limits: the controller's are those of the model
+            # joints they drive alone, and the rows keep none (`make_coupling` wants them
+            # in one place)
+            if limits is None:
+                limits = controller_limits_of_rows(M, b, joints, label)
+            joints = tuple(dataclasses.replace(j, limits=None) for j in joints)
+        coupling = make_coupling(M, b, limits, joints, label)
+        if coupling is None:
+            return dataclasses.replace(self, coupling=None, auto_beta=False)
+        return dataclasses.replace(self, joints=joints, coupling=coupling, auto_beta=False)
 
     @property
     def n_inputs(self) -> int:
