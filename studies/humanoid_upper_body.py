@@ -249,10 +249,16 @@ def split_study(meas, splits: int, seed: int = 0, robot=None):
     return out
 
 
-def verdict(cal) -> str:
-    """The audit's first failed check in a line, or that it passed."""
+def verdict(cal, full: bool = False) -> str:
+    """The audit's verdict: its first failed check (its name and whether it names a
+    model error; `full`: all it says), or that it passed."""
     failed = cal.audit.failures
-    return f"{failed[0].name}: {failed[0].text}" if failed else "audit passed"
+    if not failed:
+        return "audit passed"
+    first = failed[0]
+    if full:
+        return f"{first.name}: {first.text}"
+    return f"FAILED {first.name}" + (" (a model error, not noise)" if first.cause else "")
 
 
 def main() -> None:
@@ -276,6 +282,7 @@ def main() -> None:
             for k, (held, fitted, cal, seconds) in enumerate(rows, start=1):
                 mm = f"{held * 1e3:>11.2f}  {fitted * 1e3:>12.2f}"
                 print(f"{k:>5}  {mm}  {seconds:>5.1f}  {verdict(cal)}")
+            print(f"split 1's audit: {verdict(rows[0][2], full=True)}")
             held = np.array([r[0] for r in rows]) * 1e3
             print(
                 f"held-out mean over splits {held.mean():.2f} mm (worst {held.max():.2f}); "
