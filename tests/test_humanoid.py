@@ -65,6 +65,21 @@ def test_a_urdf_tree_takes_a_coupling_with_the_files_limits(robot):
     ]
 
 
+def test_the_coupled_tree_with_its_sizes_in_a_robot_file(robot, tmp_path):
+    """A robot file keeps all of it (the URDF cannot: it would take controller joints for
+    the model's): the tree, the coupling with the controller's limits, the sizes."""
+    assert cc.save_robot(robot, tmp_path / "humanoid.toml") == []
+    text = (tmp_path / "humanoid.toml").read_text()
+    assert "[coupling]" in text and "q4 = {q2 = -1.0, q3 = -1.0}" in text and "[plausible]" in text
+    back = cc.load_robot(tmp_path / "humanoid.toml")
+    q = cc.poses.uniform(robot, 50, seed=4)
+    assert back.tips == robot.tips and back.dof == 17 and back.model_dof == 18
+    assert np.abs(back.position(q) - robot.position(q)).max() < 1e-12
+    assert np.array_equal(back.limits, robot.limits) and back.sizes == robot.sizes
+    with pytest.raises(cc.CalibrationError, match="couples its joints"):
+        cc.save_robot(robot, tmp_path / "humanoid.urdf")
+
+
 def test_the_stand_in_agrees_with_casecal_and_roboticstoolbox(robot):
     """The stand-in's own kinematics (numpy), casecal's coupled tree and roboticstoolbox's
     URDF model at the same joint values, to 1e-12 m at both hands."""
