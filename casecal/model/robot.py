@@ -377,7 +377,11 @@ class Robot:
 
         label = f"robot {self.name!r}"
         joints = self.joints
-        fewer = np.ndim(M) == 2 and 0 < np.shape(M)[1] < np.shape(M)[0] == len(joints)
+        try:
+            shape = np.shape(np.asarray(M, dtype=float))
+        except (TypeError, ValueError):
+            shape = ()  # `make_coupling` says what is wrong with it
+        fewer = len(shape) == 2 and 0 < shape[1] < shape[0] == len(joints)
         if fewer and any(j.limits is not None for j in joints):
             # a URDF's joints all carry limits: the controller's are those of the model
             # joints they drive alone, and the rows keep none (`make_coupling` wants them
