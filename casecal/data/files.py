@@ -3,7 +3,8 @@
 One row per pose. Columns (any order; extra columns are kept out of the way and ignored):
 
 - joints ``q1`` … ``qn`` in rad (revolute) or m (prismatic), or with the unit in the
-  name: ``q1_deg``, ``q1_rad``, ``q3_mm``, ``q3_m``;
+  name: ``q1_deg``, ``q1_rad``, ``q3_mm``, ``q3_m``; with a joint coupling
+  (`casecal.Robot.coupling`) the controller's joints, the coupling's columns in order;
 - measured position ``x, y, z`` in m, or ``x_mm, y_mm, z_mm``;
 - several reflectors per pose instead: ``p1_x_mm, p1_y_mm, p1_z_mm, p2_x_mm, …``;
 - a kinematic tree's tips (`casecal.model.tree`) instead: one point per tip, named after

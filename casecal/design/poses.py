@@ -81,10 +81,9 @@ def uniform(robot: Robot, n: int, seed=None) -> np.ndarray:
     """
     n = _check_count(n)
     rng = rng_from(seed)
-    if robot.reached_through:  # a coupled robot's model: the poses the coupling reaches
-        coupling, limits = robot.reached_through
-        limits = np.asarray(limits)
-        return coupling.model(rng.uniform(limits[:, 0], limits[:, 1], size=(n, len(limits))))
+    if robot.coupled_from is not None:  # a coupled robot's model: the poses it can take
+        coupled = robot.coupled_from
+        return coupled.model_joints(uniform(coupled, n, rng))[:, : robot.dof]
     limits = robot.limits
     return rng.uniform(limits[:, 0], limits[:, 1], size=(n, robot.dof))
 

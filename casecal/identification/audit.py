@@ -118,6 +118,9 @@ class Check:
     name: str
     passed: bool | None
     text: str
+    cause: bool = False
+    """A failure that explains the others (a model error the residuals show): first in
+    `Audit.failures`."""
 
     def __post_init__(self) -> None:
         if self.passed is not None:  # numpy's bool is not `False`: keep `is` tests honest
@@ -139,7 +142,7 @@ class Audit:
         """The failed checks, causes first: a parameter missing or unsupported explains a
         residual too large for the noise or a fit that stalled, not the other way round."""
         failed = [c for c in self.checks if c.passed is False]
-        return tuple(sorted(failed, key=lambda c: c.name not in CAUSES))
+        return tuple(sorted(failed, key=lambda c: (not c.cause, c.name not in CAUSES)))
 
     def lines(self) -> list[str]:
         """One line per check: ``ok``, ``FAIL`` or ``n/a``, the check, what was measured."""
@@ -196,8 +199,9 @@ class Facts:
     bound_gain: float = 0.0
     """Cost decrease freeing those from their bounds would add to the free ones'."""
     lack_of_fit: object = None
-    """Without σ: the `casecal.identification.lack_of_fit.LackOfFit` of smooth joint
-    errors beside the estimates (None: not judged)."""
+    """The `casecal.identification.lack_of_fit.LackOfFit` of smooth joint errors beside
+    the estimates: without σ, whether the residuals are noise; with σ, only when they
+    exceed it, whether that is a model error (None: not judged)."""
     rms_before: float | None = None
     """RMS error (m) of the nominal robot with its frames fitted, the uncalibrated error
     (`casecal.identification.reference`); None: `rms_start`."""
@@ -233,9 +237,13 @@ def audit(f: Facts) -> Audit:
 def _converged(f: Facts) -> Check:
     if f.solver_status < 0:
         return Check("converged", False, f.solver_message or "the solver reported an error")
-    scale = 1.0 if f.known else (2.0 * f.cost_final / f.dof if f.dof > 0 else 1.0)
+    # beyond the noise, the estimates' standard errors are the residuals', not σ's: one
+    # of those is what a step must promise (a model error's residual promises a little
+    # with every step)
+    known = f.known and not beyond_noise(f)
+    scale = 1.0 if known else (2.0 * f.cost_final / f.dof if f.dof > 0 else 1.0)
     limit = OPTIMALITY * scale + f.floor
-    unit = "noise variances" if f.known else "residual variances"
+    unit = "noise variances" if known else "residual variances"
     text = (
         f"one more step would lower the cost by {f.predicted_decrease / scale:.2g} {unit} "
         f"(limit {OPTIMALITY:g})"
@@ -331,14 +339,26 @@ def _noise(f: Facts) -> Check:
                 "the model does not fit; if your instrument really is that noisy, state its "
                 "σ (--noise, or a sigma_mm column) and the fit is judged against it"
             )
-    if f.lack_of_fit is not None and not at_floor:
+    model_error = False
+    if f.lack_of_fit is not None and not at_floor and (not f.known or not ok):
         lof = f.lack_of_fit
-        matter, statistic, bound = held_matter(lof.gain, lof.n_extra, lof.cost, lof.dof, False)
+        matter, statistic, limit = held_matter(lof.gain, lof.n_extra, lof.cost, lof.dof, False)
         text += (
             f"; smooth functions of the joint values explain {statistic:.3g}× more per "
-            f"direction than what remains (chance: up to {bound:.3g})"
+            f"direction than what remains (chance: up to {limit:.3g})"
         )
-        if matter:
+        if matter and f.known:
+            # σ is the instrument's: what exceeds it and follows the joint values is the
+            # model's, and it limits the calibration, not the noise
+            model_error = True
+            text += (
+                f": a MODEL ERROR, not noise: the residuals (RMS {f.rms_final * 1e3:.3g} mm "
+                "per point) follow the joint values, a pose-dependent effect the rigid "
+                "model lacks (joints bending under gravity, i.e. elasticity; joint-angle "
+                "harmonics; a parameter not asked for); expect a held-out error about the "
+                "residuals', not the noise's (add the term, e.g. with_compliance)"
+            )
+        elif matter:
             ok = False
             text += (
                 ": the residuals follow the joint values, a model error (a term the model "
@@ -355,7 +375,17 @@ def _noise(f: Facts) -> Check:
                 " would: the residuals change smoothly with the joint values, a model error "
                 "(a parameter missing or held, a fit stuck short of the minimum), not noise"
             )
-    return Check(name, ok, text)
+    return Check(name, ok, text, cause=model_error)
+
+
+def beyond_noise(f: Facts) -> bool:
+    """With σ stated, whether the residuals exceed it by more than chance (the noise
+    check's χ² bound): a model error or a stalled fit, against which a held parameter's
+    or a stalled step's gain is judged in residual variances, not σ's."""
+    if not f.known or f.dof <= 0:
+        return False
+    cost, dof, _, _ = f.inliers or (f.cost_final, f.dof, f.rms_final, 0)
+    return 2.0 * cost / dof > SIGMA_SLACK**2 * chi2_quantile(CHI2_LEVEL, dof) / dof
 
 
 def smoothness(q: np.ndarray, residuals: np.ndarray, seed: int = 0) -> float | None:
@@ -404,9 +434,12 @@ def _held(f: Facts) -> Check:
     name = "held parameters do not matter"
     if not f.held:
         return Check(name, None, "none held for the noise")
-    matter, statistic, bound = held_matter(f.held_gain, len(f.held), f.cost_final, f.dof, f.known)
+    # beyond the noise, judged against the residual: any direction picks up some of a
+    # model error, and only gaining more than the rest of it says a held one matters
+    known = f.known and not beyond_noise(f)
+    matter, statistic, bound = held_matter(f.held_gain, len(f.held), f.cost_final, f.dof, known)
     ok = not matter or f.cost_final <= f.floor
-    if f.known:
+    if known:
         text = (
             f"freeing {listed(f.held)} would lower the cost by {statistic / 2:.3g} noise "
             f"variances (chance: up to {bound / 2:.3g})"
@@ -419,7 +452,7 @@ def _held(f: Facts) -> Check:
     if not ok:
         text += (
             ": the data do see them; the residuals are a missing parameter, not noise ("
-            + ("" if f.known else "state the measurement σ, or ")
+            + ("" if known or f.known else "state the measurement σ, or ")
             + "measure more, better-spread poses, so that they are determined)"
         )
     return Check(name, ok, text)
@@ -429,13 +462,14 @@ def _outside(f: Facts) -> Check:
     name = "parameters not asked for do not matter"
     if not f.outside_visible:
         return Check(name, None, "none outside the asked-for set moves the measured points")
+    known = f.known and not beyond_noise(f)  # as for the held ones
     matter, statistic, bound = held_matter(
-        f.outside_gain, f.outside_visible, f.cost_final, f.dof, f.known
+        f.outside_gain, f.outside_visible, f.cost_final, f.dof, known
     )
     ok = not matter or f.cost_final <= f.floor
     lead = ", ".join(f.outside_leading)
     which = f" (most: {lead})" if not ok else ""
-    if f.known:
+    if known:
         text = (
             f"freeing the {f.outside_visible} directions they add{which} would lower the "
             f"cost by {statistic / 2:.3g} noise variances (chance: up to {bound / 2:.3g})"

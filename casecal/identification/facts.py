@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.parameters import unit
-from .audit import Facts, predicted_rms, smoothness
+from .audit import SIGMA_SLACK, Facts, predicted_rms, smoothness
 from .evidence import blind_only_here, gauge_bound, outside_gain, still_joints
 from .lack_of_fit import lack_of_fit
 from .linalg import Reduction
@@ -126,9 +126,12 @@ def gather(
     n_prior = int(np.sum(prior_w > 0))
     workspace = predicted_rms(out.robot, reference, out.estimated, cov)
     # the one-shot method's leftovers are its linearisation's, which "converged" judges
+    # with σ, only to say what residuals beyond the noise are (the audit's model error):
+    # χ² within SIGMA_SLACK² passes the noise check whatever this says
+    chi2 = fit.rr / max(linear.rows - len(out.estimated), 1)
     smooth = (
         None
-        if settings.known or settings.method == "svd"
+        if (settings.known and chi2 <= SIGMA_SLACK**2) or settings.method == "svd"
         else lack_of_fit(
             make(out.robot, names=out.estimated),
             robot.joint_types,

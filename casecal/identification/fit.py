@@ -296,7 +296,10 @@ def identify(
     point_residuals = est.point_residuals(x0)
     checks = with_size_check(audit(got.facts), robot, out.robot, q, y)
     status, message = verdict(checks, out.solver_status, out.message)
-    lead = status < 0 and outliers_lead(got.outliers, len(q))
+    # a model error the residuals show explains poses standing out too (where gravity
+    # bends the arm most): then they do not lead
+    model_error = bool(checks.failures) and checks.failures[0].cause
+    lead = status < 0 and outliers_lead(got.outliers, len(q)) and not model_error
     if lead:  # the likelier cause leads (issue 20)
         message = f"{stand_out(got.outliers, loss)}; {message}"
 

@@ -145,9 +145,10 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
     order = [names[i] for i in pivot_order(names) if names[i] in start_analysis.base_parameters]
     point, weights = start, np.ones((start_analysis.n_poses, make(start, names=names).m))
     iterations, history, pruned, frozen, seen, protected = 0, [], {}, {}, [], set()
-    end_analysis, settled = start_analysis, False
+    end_analysis, settled, restarted = start_analysis, False, False
     rounds = 0
     for rounds in range(1, MAX_ROUNDS + 1):
+        restarted = False
         point, its, status, hist, message, weights = _solve_round(
             make, point, names, order, settings, weights, hold, rounds
         )
@@ -219,7 +220,16 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
             # wild values: start over, with every held parameter at its start value
             point = start
             frozen = {}
+            restarted = True
         order = keep
+    if restarted:
+        # the rounds ran out right after a restart: fit what is kept once more, or the
+        # robot returned would be the start's while its estimates are said to be fitted
+        point, its, status, hist, message, weights = _solve_round(
+            make, point, names, order, settings, weights, hold, rounds + 1
+        )
+        iterations += its
+        history += hist[1:]
     return Outcome(
         robot=point,
         estimated=tuple(n for n in names if n in order),

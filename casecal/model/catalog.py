@@ -56,6 +56,7 @@ from pathlib import Path
 
 from ..errors import CalibrationError
 from ..textio import read_text
+from .coupling import make_coupling
 from .names import catalog_entry, is_path, missing_file, path_text, robots
 from .robot import Frame, Joint, Robot
 from .terms_toml import TOP_KEYS, add_terms, split_rows
@@ -368,6 +369,9 @@ def _coupling(robot: Robot, table, length: float, angle: float, label: str) -> R
                     f"{label}: coupling.limits[{c + 1}] must be [min, max] or [] (no limits)"
                 )
     try:
+        # a file keeps the limits in one place: rows and [coupling] both is refused here,
+        # where `with_coupling` would take a URDF's rows for the controller's
+        make_coupling(M, b, limits, robot.joints, f"robot {robot.name!r}")
         return robot.with_coupling(M, b, limits)
     except CalibrationError as exc:
         raise CalibrationError(f"{label}: [coupling]: {exc}") from None

@@ -207,41 +207,6 @@ def make_coupling(matrix, offset, limits, joints, label: str) -> Coupling | None
     )
 
 
-def limits_from_rows(M, b, joints, label: str) -> tuple | None:
-    """Per controller joint the limits of the model joint it drives one to one (row i is
-    ``q_i = q_c + b_i``), shifted by the offset, for a coupling with fewer controller joints
-    than model joints given without limits (`Robot.with_coupling`); None for a square `M`
-    (the rows keep their limits) or one that is not a matrix (`make_coupling` says so)."""
-    try:
-        M = np.asarray(M, dtype=float)
-        b = np.zeros(len(joints)) if b is None else np.asarray(b, dtype=float)
-    except (TypeError, ValueError):
-        return None
-    if (
-        M.ndim != 2
-        or M.shape[0] != len(joints)
-        or M.shape[1] >= M.shape[0]
-        or b.shape != (len(joints),)
-    ):
-        return None
-    out = []
-    for c in range(M.shape[1]):
-        rows = [
-            i
-            for i in range(M.shape[0])
-            if M[i, c] == 1.0 and np.count_nonzero(M[i]) == 1 and joints[i].limits is not None
-        ]
-        if not rows:
-            raise CalibrationError(
-                f"{label}: controller joint {c + 1} drives no model joint one to one whose "
-                "limits it could take; give the controller joints' limits with the coupling "
-                "(limits=)"
-            )
-        low, high = joints[rows[0]].limits
-        out.append((low - b[rows[0]], high - b[rows[0]]))
-    return tuple(out)
-
-
 _TWICE = (
     "{label}: with as many controller joints as model joints the model's joint rows carry "
     "the limits (row i for controller joint i); give none with the coupling"
@@ -279,6 +244,50 @@ def _controller_limits(limits, k: int, M: np.ndarray, types: str, label: str) ->
             )
         out.append((lo, hi))
     return tuple(out)
+
+
+def controller_limits_of_rows(matrix, offset, joints, label: str) -> list:
+    """Per controller joint, the limits of the model joint it alone drives, SI.
+
+    A model joint ``q_i = c q_k + b_i`` (row i of `matrix` nonzero in column k only) with
+    limits [lo, hi] bounds controller joint k to ``[(lo - b_i) / c, (hi - b_i) / c]``
+    (sorted); several such rows, the tightest of them. Used where the model's joint rows
+    carry limits (a URDF's) and the controller has fewer joints (`Robot.with_coupling`).
+
+    Raises
+    ------
+    CalibrationError
+        A controller joint that drives no limited model joint alone (give ``limits=``),
+        or whose rows' ranges do not overlap.
+    """
+    try:
+        M = np.array(matrix, dtype=float)
+        b = np.zeros(len(M)) if offset is None else np.array(offset, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None  # `make_coupling` says what is wrong with them
+    if M.ndim != 2 or b.shape != (M.shape[0],) or not np.all(np.isfinite(M)):
+        return None
+    out = []
+    for k in range(M.shape[1]):
+        ranges = []
+        for i in np.flatnonzero(M[:, k]):
+            if np.count_nonzero(M[i]) == 1 and joints[i].limits is not None:
+                lo, hi = ((v - b[i]) / M[i, k] for v in joints[i].limits)
+                ranges.append((min(lo, hi), max(lo, hi)))
+        if not ranges:
+            raise CalibrationError(
+                f"{label}: controller joint {k + 1} drives no model joint alone whose limits "
+                "could bound it; give its limits with the coupling (limits=[[min, max], …], "
+                "one per controller joint, rad or m)"
+            )
+        lo, hi = max(r[0] for r in ranges), min(r[1] for r in ranges)
+        if not lo < hi:
+            raise CalibrationError(
+                f"{label}: the model joints controller joint {k + 1} drives alone have "
+                "limits that do not overlap; give its limits with the coupling (limits=)"
+            )
+        out.append((float(lo), float(hi)))
+    return out
 
 
 def controller_type(M: np.ndarray, types: str, c: int) -> str:

@@ -147,11 +147,12 @@ class Robot:
         (`with_coupling`); None: the controller's joints are the model's. With a coupling,
         every joint value the API takes or returns is the controller's (`dof` of them),
         and `limits` bound the controller joints (`casecal.model.coupling`).
-    reached_through : tuple
-        Set by `uncoupled` only: ``(coupling, controller limits (k, 2))`` of the robot the
-        model came from, so that poses drawn for the model (`casecal.design.poses.uniform`:
-        the audit's workspace) are poses the coupled robot reaches, not its joints' hull
-        (a passive joint moving on its own). Empty otherwise.
+    coupled_from : Robot or None
+        Set by `uncoupled` (the model of a coupled robot, as `identify` fits it): the
+        coupled robot, so that poses drawn for the model (`casecal.poses.uniform`: the
+        audit's, the workspace's) are the controller's mapped through the coupling, poses
+        the robot can take; not a joint box that moves a passive joint on its own. No
+        part of the kinematics, comparison or repr.
     auto_beta : bool, init only
         Give Hayati's ``beta = 0`` to every link with parallel neighbouring axes whose
         ``beta`` is None (the rule in `casecal.model.kinematics`). Default True.
@@ -179,7 +180,7 @@ class Robot:
     sessions: tuple = ()
     sizes: tuple = ()
     coupling: object = None
-    reached_through: tuple = ()
+    coupled_from: object = field(default=None, repr=False, compare=False)
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
@@ -315,9 +316,8 @@ class Robot:
         joints = tuple(
             dataclasses.replace(j, limits=r) for j, r in zip(self.joints, ranges, strict=True)
         )
-        reached = (self.coupling, tuple(map(tuple, self.limits)))
         return dataclasses.replace(
-            self, joints=joints, coupling=None, reached_through=reached, auto_beta=False
+            self, joints=joints, coupling=None, coupled_from=self, auto_beta=False
         )
 
     def recoupled(self, like: Robot) -> Robot:
@@ -330,7 +330,7 @@ class Robot:
             for j, o in zip(self.joints, like.joints, strict=True)
         )
         return dataclasses.replace(
-            self, joints=joints, coupling=like.coupling, reached_through=(), auto_beta=False
+            self, joints=joints, coupling=like.coupling, coupled_from=None, auto_beta=False
         )
 
     def with_coupling(self, M, b=None, limits=None) -> Robot:
@@ -347,10 +347,12 @@ class Robot:
         limits : sequence of (float, float) or None, optional
             Only with fewer controller joints than model joints: per controller joint its
             [min, max] (rad or m) or None (a revolute joint without limits). With as many,
-            the joint rows' limits bound the controller joints, row i joint i. Not given
-            while the joint rows carry limits (a URDF's always do): each controller joint
-            takes those of the model joint it alone drives one to one (``q_i = q_c +
-            b_i``), and the rows keep none; refused if a controller joint drives none so.
+            the joint rows' limits bound the controller joints, row i joint i. With fewer
+            and none given, a robot whose joint rows carry limits (a URDF's) gives each
+            controller joint those of the model joint it alone drives (``q_i = c q_k + b``:
+            a torso's actuated joints), and the coupled joints' own limits are dropped (the
+            controller's bound them); a controller joint driving no model joint alone
+            needs `limits`. Given, they replace the joint rows' limits.
 
         Returns
         -------
@@ -371,18 +373,25 @@ class Robot:
         >>> M = np.eye(6); M[2, 1] = M[2, 2] = -1.0  # doctest: +SKIP
         >>> arm = load_robot("kr16_2").with_coupling(M)  # doctest: +SKIP
         """
-        from .coupling import limits_from_rows, make_coupling
+        from .coupling import controller_limits_of_rows, make_coupling
 
         label = f"robot {self.name!r}"
         joints = self.joints
-        if limits is None and any(j.limits is not None for j in joints):
-            # a URDF's joints all carry limits: with fewer controller joints, those of the
-            # rows a controller joint drives one to one become that controller joint's
-            found = limits_from_rows(M, b, joints, label)
-            if found is not None:
-                limits = found
-                joints = tuple(dataclasses.replace(j, limits=None) for j in joints)
+        try:
+            shape = np.shape(np.asarray(M, dtype=float))
+        except (TypeError, ValueError):
+            shape = ()  # `make_coupling` says what is wrong with it
+        fewer = len(shape) == 2 and 0 < shape[1] < shape[0] == len(joints)
+        if fewer and any(j.limits is not None for j in joints):
+            # a URDF's joints all carry limits: the controller's are those of the model
+            # joints they drive alone, and the rows keep none (`make_coupling` wants them
+            # in one place)
+            if limits is None:
+                limits = controller_limits_of_rows(M, b, joints, label)
+            joints = tuple(dataclasses.replace(j, limits=None) for j in joints)
         coupling = make_coupling(M, b, limits, joints, label)
+        if coupling is None:
+            return dataclasses.replace(self, coupling=None, auto_beta=False)
         return dataclasses.replace(self, joints=joints, coupling=coupling, auto_beta=False)
 
     @property
