@@ -39,7 +39,16 @@ below which they lie at one point or along a line: the plane's tilt is then unde
 
 POINT_TURN = 0.05
 """RMS angle (rad, about 3°) of the tool's orientations about their mean below which a
-fixed point was held in one orientation: the tool tip's offset is then undetermined."""
+fixed point was held in one orientation: the tool tip's offset is then undetermined. The
+turns must spread so about two axes (their second principal RMS): turned about one axis
+only, the offset along it is undetermined, and fits wandered along such directions."""
+
+PLAUSIBLE_FACTOR = 2.0
+"""A contact fit whose estimate of a joint parameter deviates by more than this many
+times its plausible size (`casecal.model.parameters.facts_of`: 2.5 mm, 0.5° unless the
+robot says otherwise) fails its audit (`plausibility_check`)."""
+
+PLAUSIBLE_CHECK = "estimates a real robot could have"
 
 
 def check_robot(robot: Robot, measurements) -> None:
@@ -127,13 +136,23 @@ def start_frame(robot: Robot, q_plain, model: np.ndarray, kind: str, label: str)
     if kind == "point":
         turns = robot.fk(q_plain)[:, :3, :3]
         mean = _mean_rotation(turns)
-        spread = float(np.sqrt(np.mean(np.sum(rotation_vector(turns @ mean.T) ** 2, axis=1))))
+        v = rotation_vector(turns @ mean.T)  # (n, 3), rad
+        spread = float(np.sqrt(np.mean(np.sum(v**2, axis=1))))
         if spread < POINT_TURN:
             raise CalibrationError(
                 f"fixed-point session {label!r}: the tool turns by {np.degrees(spread):.2g}° "
                 f"RMS over its {n} poses: held in one orientation, a point tells nothing of "
                 "the tool; hold the tip in the point in orientations tens of degrees apart "
                 "(tilted about two axes)"
+            )
+        second = float(np.linalg.svd(v - v.mean(axis=0), compute_uv=False)[1] / np.sqrt(n))
+        if second < POINT_TURN:
+            raise CalibrationError(
+                f"fixed-point session {label!r}: the tool turns about one axis only (about "
+                f"any other by {np.degrees(second):.2g}° RMS over its {n} poses): the tip's "
+                "offset along that axis, and the joint parameters that move it, are then "
+                "undetermined; hold the tip in the point in orientations tilted about two "
+                "axes, tens of degrees apart"
             )
         out[:3, 3] = -centre  # the mean nominal tip maps to 0
         return out
@@ -192,3 +211,77 @@ def note(label: str, kind: str, held: tuple[str, ...], poses: int) -> str:
         f"plane fitted through the nominal tips ({names}). Its normal and offset are "
         "estimated; what of the robot moves the tip only within the plane it cannot see."
     )
+
+
+def plausibility_check(nominal: Robot, fitted: Robot, estimated):
+    """The audit line of a contact fit: its joint parameters' estimates within
+    `PLAUSIBLE_FACTOR` times their plausible sizes.
+
+    Contacts see the robot only through where its tip meets points and planes; at poses
+    that leave a direction nearly unseen (a point held while turning about one axis, one
+    plane), a fit can wander along it tens of millimetres and still explain the data as
+    well as the truth does, and the prediction check, which measures the error before
+    calibration by how far the fit moved, cannot tell. A tracker fit is not judged so:
+    its data show the robot's error directly.
+    """
+    from ..model.parameters import facts_of, unit
+    from .audit import Check
+
+    joint = [n for n in estimated if not n.startswith(("base_", "tool_")) and "@" not in n]
+    moved = fitted.deviations_from(nominal, joint)
+    far = []
+    for name in joint:
+        size = facts_of(name, nominal.sizes).plausible
+        if abs(moved[name]) > PLAUSIBLE_FACTOR * size:
+            far.append((abs(moved[name]) / size, name))
+    if not far:
+        return Check(
+            PLAUSIBLE_CHECK,
+            True,
+            f"every joint parameter within {PLAUSIBLE_FACTOR:g}× its plausible size",
+        )
+    far.sort(reverse=True)
+    shown = ", ".join(
+        f"{name} {_shown(moved[name], unit(name))} ({ratio:.3g}× plausible)"
+        for ratio, name in far[:4]
+    )
+    more = f" and {len(far) - 4} more" if len(far) > 4 else ""
+    return Check(
+        PLAUSIBLE_CHECK,
+        False,
+        f"{shown}{more}: no real robot is that far from its nominal, and contacts (points, "
+        "planes) leave directions these poses barely see, along which a fit wanders; tilt "
+        "the tool about two axes at each point, touch planes facing three ways, or give the "
+        "robot its own sizes (with_plausible) if its errors really are that large",
+    )
+
+
+def _shown(value: float, si: str) -> str:
+    if si == "m":
+        return f"{value * 1e3:+.3g} mm"
+    if si == "rad":
+        return f"{np.degrees(value):+.3g}°"
+    return f"{value:+.3g} {si}"
+
+
+def contact_checks(checks, nominal: Robot, fitted: Robot, estimated, alone: bool):
+    """`checks` (an `Audit`) of a fit with contact sessions, with `plausibility_check`;
+    with contacts `alone`, a failed size check leads, in words of what contacts cannot
+    see (their points are 0: a robot shrunk to a point meets every one of them)."""
+    import dataclasses
+
+    from .audit import Audit
+
+    plausible = plausibility_check(nominal, fitted, estimated)
+    lines = [*checks.checks, plausible]
+    size = [c for c in lines if c.name == "robot keeps its size" and c.passed is False]
+    if alone and size:
+        lead = dataclasses.replace(
+            size[0],
+            text=f"{size[0].text.split(',')[0]}: contacts (points, planes) alone cannot see "
+            "the robot's size, since a robot shrunk toward a point meets every point and "
+            "plane; leave out of the parameters a length you know (the tool's, or the last "
+            "link's: e.g. without a6 and d6) so that it sets the size",
+        )
+        lines = [lead, *(c for c in lines if c is not size[0])]
+    return Audit(tuple(lines))

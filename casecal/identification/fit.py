@@ -38,7 +38,7 @@ from .analysis import represent, selection
 from .audit import audit
 from .calibration import STATUS_MESSAGES, Calibration
 from .contact import check_robot as check_contact_robot
-from .contact import plausible_error
+from .contact import contact_checks, plausible_error
 from .facts import gather, point_rms
 from .problem import Problem
 from .reference import FALLBACK_NOTE, frame_parameters, frames_fitted
@@ -295,6 +295,8 @@ def identify(
     est, x0 = got.estimated, np.zeros(len(out.estimated))
     point_residuals = est.point_residuals(x0)
     checks = with_size_check(audit(got.facts), robot, out.robot, q, y)
+    if sessions is not None and sessions.kinds:  # contacts: estimates must stay plausible
+        checks = contact_checks(checks, robot, out.robot, out.estimated, at_size)
     status, message = verdict(checks, out.solver_status, out.message)
     # a model error the residuals show explains poses standing out too (where gravity
     # bends the arm most): then they do not lead

@@ -27,6 +27,7 @@ one-shot ``"svd"`` method is the paper's procedure and runs a single round witho
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -306,7 +307,9 @@ def check_analysis(full: Problem) -> Observability:
         raise CalibrationError(
             f"{n_poses} poses give {rows} coordinates, fewer than the "
             f"{len(names)} parameters asked for, so they cannot tell which are blind; "
-            f"measure at least {len(names) // 3 + 1} poses or ask for fewer parameters"
+            f"measure at least {math.ceil((len(names) + 1) / (rows / n_poses))} poses "
+            f"({rows / n_poses:.3g} coordinate{'s' * (rows != n_poses)} a pose) or ask for "
+            "fewer parameters"
         )
     if not obs.base_parameters:
         raise CalibrationError(
