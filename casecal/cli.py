@@ -148,6 +148,12 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     truth = load_deviations(args.truth, robot) if args.truth else None
     held = None
     if args.holdout:
+        if meas.contact:  # validate measures positions: refused before any fit or file
+            raise CalibrationError(
+                "--holdout cannot validate contact sessions (fixed points, planes): their "
+                "held-out errors are not positions; leave --holdout out (the summary gives "
+                "the contacts' residuals), or hold out a session of measured points"
+            )
         meas, held = split(meas, args.holdout, seed=args.seed)
     rot = parse_angle(args.orientation_sigma) if args.orientation_sigma else None
     options = dict(

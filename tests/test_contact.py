@@ -518,3 +518,16 @@ def test_contacts_with_every_length_free_fail_saying_so():
     first = cal.audit.failures[0]
     assert first.name == "robot keeps its size" and "cannot see the robot's size" in first.text
     assert cal.message.startswith("failed the answer audit: robot keeps its size")
+
+
+def test_holdout_of_contacts_is_refused_before_the_fit(tmp_path):
+    """--holdout validates positions: with contact rows it used to fit, write -o, then
+    fail; now it is refused first and nothing is written."""
+    from casecal.cli import main
+
+    cc.save_robot(nominal(), tmp_path / "nominal.toml")
+    cc.write_csv(tmp_path / "planes.csv", plane_campaign()[-1], nominal())
+    out = tmp_path / "cal.toml"
+    argv = ["identify", str(tmp_path / "nominal.toml"), str(tmp_path / "planes.csv")]
+    assert main([*argv, "--parameters", PARAMETERS, "--holdout", "0.2", "-o", str(out)]) == 2
+    assert not out.exists()
