@@ -531,3 +531,25 @@ def test_holdout_of_contacts_is_refused_before_the_fit(tmp_path):
     argv = ["identify", str(tmp_path / "nominal.toml"), str(tmp_path / "planes.csv")]
     assert main([*argv, "--parameters", PARAMETERS, "--holdout", "0.2", "-o", str(out)]) == 2
     assert not out.exists()
+
+
+def test_joint_values_in_another_unit_are_refused_with_the_unit(tmp_path):
+    """Contacts measure no position to check the joints against, but their nominal tips
+    must meet at a point or on a plane: radians in q_deg columns (the robot barely moves)
+    and degrees in q_rad columns (its tip all over) are refused, the unit named."""
+    import pandas as pd
+
+    robot = nominal()
+    cc.write_csv(tmp_path / "points.csv", point_campaign()[-1], robot)
+    frame = pd.read_csv(tmp_path / "points.csv")
+    joints = [c for c in frame.columns if c.endswith("_deg")]
+    frame[joints] = np.radians(frame[joints])
+    frame.to_csv(tmp_path / "radians.csv", index=False)
+    with pytest.raises(cc.CalibrationError, match="radians in q_deg"):
+        cc.identify(robot, cc.read_csv(tmp_path / "radians.csv", robot), PARAMETERS)
+    # degrees as radians: a file says so itself (beyond a turn); the API's arrays are
+    # caught by the tips, which land decimetres off one plane
+    planes = plane_campaign()[-1]
+    wrong = dataclasses.replace(planes, q=np.degrees(planes.q))
+    with pytest.raises(cc.CalibrationError, match=r"mm RMS from the best plane.*q_rad"):
+        cc.identify(robot, wrong, PARAMETERS)

@@ -43,6 +43,11 @@ fixed point was held in one orientation: the tool tip's offset is then undetermi
 turns must spread so about two axes (their second principal RMS): turned about one axis
 only, the offset along it is undetermined, and fits wandered along such directions."""
 
+CONTACT_SPREAD = 0.1
+"""RMS distance (m) of a session's nominal tips from their point (a fixed point) or from
+their best plane (a plane) past which the joint values cannot be this robot's at one
+point or plane: a robot's own errors move its tip millimetres, not decimetres."""
+
 PLAUSIBLE_FACTOR = 2.0
 """A contact fit whose estimate of a joint parameter deviates by more than this many
 times its plausible size (`casecal.model.parameters.facts_of`: 2.5 mm, 0.5° unless the
@@ -133,6 +138,7 @@ def start_frame(robot: Robot, q_plain, model: np.ndarray, kind: str, label: str)
     n = len(model)
     centre = model.mean(axis=0)
     out = np.eye(4)
+    _check_spread(robot, q_plain, model - centre, kind, label)
     if kind == "point":
         turns = robot.fk(q_plain)[:, :3, :3]
         mean = _mean_rotation(turns)
@@ -143,7 +149,7 @@ def start_frame(robot: Robot, q_plain, model: np.ndarray, kind: str, label: str)
                 f"fixed-point session {label!r}: the tool turns by {np.degrees(spread):.2g}° "
                 f"RMS over its {n} poses: held in one orientation, a point tells nothing of "
                 "the tool; hold the tip in the point in orientations tens of degrees apart "
-                "(tilted about two axes)"
+                f"(tilted about two axes){_small_joints(robot, q_plain)}"
             )
         second = float(np.linalg.svd(v - v.mean(axis=0), compute_uv=False)[1] / np.sqrt(n))
         if second < POINT_TURN:
@@ -169,6 +175,7 @@ def start_frame(robot: Robot, q_plain, model: np.ndarray, kind: str, label: str)
             f"plane session {label!r}: its {n} touches lie within {spread * 1e3:.2g} mm of "
             "one point or one line (nominally), which leaves the plane's tilt undetermined; "
             "touch it at points spread over an area, tens of millimetres apart each way"
+            f"{_small_joints(robot, q_plain)}"
         )
     normal = Vt[2]
     # deterministic: the normal toward the robot's base, the in-plane x from the axis of
@@ -185,6 +192,38 @@ def start_frame(robot: Robot, q_plain, model: np.ndarray, kind: str, label: str)
     out[:3, :3] = R.T
     out[:3, 3] = -R.T @ centre
     return out
+
+
+def _check_spread(robot: Robot, q_plain, offsets: np.ndarray, kind: str, label: str) -> None:
+    """Refuse a session whose nominal tips (`offsets` from their centre, (n, 3) m) are
+    decimetres from one point or one plane (`CONTACT_SPREAD`): joint values in another
+    unit, or of another robot."""
+    if kind == "point":
+        spread = float(np.sqrt(np.mean(np.sum(offsets**2, axis=1))))
+        where = "the point they are held at"
+    else:
+        if len(offsets) < 3:
+            return
+        spread = float(np.linalg.svd(offsets, compute_uv=False)[2] / np.sqrt(len(offsets)))
+        where = "the best plane through them"
+    if spread <= CONTACT_SPREAD:
+        return
+    raise CalibrationError(
+        f"{'fixed-point' if kind == 'point' else 'plane'} session {label!r}: at its joint "
+        f"values the nominal robot's tip lies {spread * 1e3:.3g} mm RMS from {where}, "
+        "where a robot's own errors move it millimetres: check the joint columns' unit "
+        f"(degrees in q_rad columns?){_small_joints(robot, q_plain)} and that the file "
+        "belongs to this robot"
+    )
+
+
+def _small_joints(robot: Robot, q_plain) -> str:
+    """A hint when every revolute joint value is within ±π degrees: radians read as
+    degrees look so."""
+    revolute = [i for i, j in enumerate(robot.joints) if j.type == "R"]
+    if revolute and np.all(np.abs(np.asarray(q_plain)[:, revolute]) <= np.radians(np.pi) + 1e-12):
+        return "; every joint value is within ±3.2°, as radians in q_deg columns would be"
+    return ""
 
 
 def _mean_rotation(R: np.ndarray) -> np.ndarray:
