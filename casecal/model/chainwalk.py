@@ -42,15 +42,7 @@ def walk(structure, base: ca.SX, q_eff, P: dict, trig: dict, after=None, joint_t
     after = after or [None] * len(q_eff)
     joint_trig = joint_trig or [None] * len(q_eff)
     if structure.convention == "urdf":
-        passive = structure.passive or ((),) * len(q_eff)
-        for jt, name, axis, q, before in zip(
-            structure.joint_types,
-            structure.joint_names,
-            structure.axes,
-            q_eff,
-            passive,
-            strict=True,
-        ):
+        for jt, name, axis, q, before in _urdf_rows(structure, q_eff):
             origin, T = _urdf_joint(
                 T, (jt, name, axis, q, before), q_eff, P, trig, joint_trig[len(bodies)]
             )
@@ -111,18 +103,8 @@ def walk_tree(structure, base: ca.SX, q_eff, P: dict, trig: dict, joint_trig=Non
     from .kinematics import frame_transform, rotation_trig
 
     joint_trig = joint_trig or [None] * len(q_eff)
-    passive = structure.passive or ((),) * len(q_eff)
     moved: list = []  # per joint, the frame it moves
-    for i, joint in enumerate(
-        zip(
-            structure.joint_types,
-            structure.joint_names,
-            structure.axes,
-            q_eff,
-            passive,
-            strict=True,
-        )
-    ):
+    for i, joint in enumerate(_urdf_rows(structure, q_eff)):
         parent = structure.parents[i]
         T = base if parent < 0 else moved[parent]
         moved.append(_urdf_joint(T, joint, q_eff, P, trig, joint_trig[i])[1])
@@ -132,3 +114,11 @@ def walk_tree(structure, base: ca.SX, q_eff, P: dict, trig: dict, joint_trig=Non
         rpy = rotation_trig(trig, [f"{name}.{c}" for c in ("roll", "pitch", "yaw")])
         tips.append((base if parent < 0 else moved[parent]) @ frame_transform(xyz, rpy))
     return ca.vertcat(*tips)
+
+
+def _urdf_rows(structure, q_eff):
+    """Per URDF joint: (type, name, axis, q, the mimic joints walked before it)."""
+    passive = structure.passive or ((),) * len(q_eff)
+    return zip(
+        structure.joint_types, structure.joint_names, structure.axes, q_eff, passive, strict=True
+    )
