@@ -567,6 +567,11 @@ def _prediction(f: Facts) -> Check:
             "robot may be no better than the nominal one away from them (measure more, "
             "better-spread poses, or ask for fewer parameters)"
         )
+    elif p > max(least, 1e-9):  # passed on the noise: the data cannot tell better
+        text += (
+            f"; within the measurement noise ({f.noise_rms * 1e3:.3g} mm RMS per coordinate), "
+            "as near as these data can tell"
+        )
     return Check(name, ok, text)
 
 

@@ -58,7 +58,7 @@ class Validation:
     def __str__(self) -> str:
         rows = [
             f"{self.n_poses} held-out poses, {self.after.n_points} measured points; "
-            "frames refitted to them, DH parameters as calibrated",
+            "frames refitted to them, the joints' parameters as calibrated",
             f"{'':8}{'RMS':>10}{'mean':>10}{'max':>10}   (mm)",
         ]
         for label, s in (("before", self.before), ("after", self.after)):

@@ -180,6 +180,7 @@ def _default_tip(joints: list, by_child: dict, base_link: str, label: str) -> st
     if len(tips) != 1:
         raise CalibrationError(
             f"{label}: more than one chain ends here; give tip_link= one of "
-            f"{', '.join(tips)} (--tip-link on the command line)"
+            f"{', '.join(tips)} (--tip-link on the command line), or a list of several for "
+            f"the tree measured at each (--tip-link {','.join(tips[:2])})"
         )
     return tips[0]
