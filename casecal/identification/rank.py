@@ -14,8 +14,8 @@ overstate it for correlated parameters: coaxial joints know their sum well and o
 difference poorly. A parameter (other than the frames, `UNPRUNED_PREFIXES`) with a standard
 error above `NEGLIGIBLE_SE` is held when
 
-- its spread exceeds the whole uncalibrated error: such an estimate could only make the
-  robot worse where it was not measured (*too wide*); or
+- its spread exceeds the whole error a calibration corrects (`WIDE`): such an estimate
+  could only make the robot worse where it was not measured (*too wide*); or
 - its standard error exceeds the plausible deviation of its unit (the robot's `sizes`;
   by default `UNITS`: 2.5 mm, 0.5°)
   while its spread is below half the noise and its estimate is within `SIGNIFICANT`
@@ -61,7 +61,10 @@ UNPRUNED_PREFIXES = ("base_", "point")
 """Parameters without a meaningful nominal value (where the instrument stands, where a
 reflector sits): estimated whenever visible, never held for being close to the start."""
 
-WIDE = "more than the whole uncalibrated error"
+WIDE = "more than the whole error a calibration corrects"
+"""The error compared is the uncalibrated robot's where positions are measured, and a
+plausible robot's error where contacts (points, planes) hide it (`casecal.identification.
+contact.plausible_error`): calling the latter "uncalibrated" overstated what was gained."""
 
 HELD_LEVEL = 1 - 1e-6
 """Quantile of χ² for the gain of freeing held parameters: stricter than the audit's 99.9 %,
