@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 import casecal as cc
+from casecal.textio import write_atomic
 
 HERE = Path(__file__).resolve().parents[1]
 URDF = HERE / "examples" / "humanoid_upper_body.urdf"
@@ -197,7 +198,7 @@ def write_mocap_csv(path, q: np.ndarray, points: np.ndarray) -> None:
     rows = np.column_stack([np.degrees(q), points.reshape(len(q), -1) * 1e3])
     lines = [",".join([*columns, "sigma_mm"])]
     lines += [",".join([*(f"{v:.6f}" for v in row), f"{SIGMA * 1e3:g}"]) for row in rows]
-    Path(path).write_text("\n".join(lines) + "\n")
+    write_atomic(path, "\n".join(lines) + "\n")  # never half a file, nor a replaced device
 
 
 def user_robot():

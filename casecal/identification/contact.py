@@ -263,16 +263,18 @@ def plausibility_check(nominal: Robot, fitted: Robot, estimated):
     calibration by how far the fit moved, cannot tell. A tracker fit is not judged so:
     its data show the robot's error directly.
     """
-    from ..model.parameters import facts_of, unit
+    from ..model.parameters import facts_of
     from .audit import Check
 
     joint = [n for n in estimated if not n.startswith(("base_", "tool_")) and "@" not in n]
     moved = fitted.deviations_from(nominal, joint)
     far = []
     for name in joint:
-        size = facts_of(name, nominal.sizes).plausible
-        if abs(moved[name]) > PLAUSIBLE_FACTOR * size:
-            far.append((abs(moved[name]) / size, name))
+        facts = facts_of(name, nominal.sizes)
+        if abs(moved[name]) > PLAUSIBLE_FACTOR * facts.plausible:
+            u = "°" if facts.shown == "deg" else f" {facts.shown}"  # as the rank's reasons
+            shown = f"{name} {moved[name] * facts.factor:+.3g}{u}"
+            far.append((abs(moved[name]) / facts.plausible, shown))
     if not far:
         return Check(
             PLAUSIBLE_CHECK,
@@ -280,10 +282,7 @@ def plausibility_check(nominal: Robot, fitted: Robot, estimated):
             f"every joint parameter within {PLAUSIBLE_FACTOR:g}× its plausible size",
         )
     far.sort(reverse=True)
-    shown = ", ".join(
-        f"{name} {_shown(moved[name], unit(name))} ({ratio:.3g}× plausible)"
-        for ratio, name in far[:4]
-    )
+    shown = ", ".join(f"{text} ({ratio:.3g}× plausible)" for ratio, text in far[:4])
     more = f" and {len(far) - 4} more" if len(far) > 4 else ""
     return Check(
         PLAUSIBLE_CHECK,
@@ -293,14 +292,6 @@ def plausibility_check(nominal: Robot, fitted: Robot, estimated):
         "the tool about two axes at each point, touch planes facing three ways, or give the "
         "robot its own sizes (with_plausible) if its errors really are that large",
     )
-
-
-def _shown(value: float, si: str) -> str:
-    if si == "m":
-        return f"{value * 1e3:+.3g} mm"
-    if si == "rad":
-        return f"{np.degrees(value):+.3g}°"
-    return f"{value:+.3g} {si}"
 
 
 def contact_checks(checks, nominal: Robot, fitted: Robot, estimated, alone: bool):
