@@ -44,6 +44,7 @@ from ..design.poses import uniform
 from ..errors import CalibrationError
 from ..model import kinematics
 from ..model.robot import Robot
+from ..observations.rig import moves_robot
 from .rank import chi2_quantile, held_matter
 
 OPTIMALITY = 0.5
@@ -598,5 +599,6 @@ def predicted_rms(
     chain = kinematics.chain(robot.structure)
     p = robot.vector()  # anchored: columns in the deviations, those `cov` is of
     J = chain.evaluate("points_jacobian", q, p, chain.columns(list(estimated)), anchor=p)
+    J = J * moves_robot(robot, estimated)  # a camera rig's poses and lens: not the robot's
     mean_square = np.einsum("nik,kl,nil->", J, cov, J) / (J.shape[0] * J.shape[1] / 3)
     return float(np.sqrt(max(mean_square, 0.0))), correction

@@ -123,9 +123,10 @@ class Calibration:
         the answer audit fails such a fit.
     still_joints : tuple of str
         Joints that barely move in the data (under 1° or 1 mm), with their value.
-    measured : {"points", "distances"}
-        What the residuals are: measured points (N·m rows of x, y, z) or distances between
-        pairs of poses (one row each).
+    measured : {"points", "distances", "pixels"}
+        What the residuals are: measured points (N·m rows of x, y, z), distances between
+        pairs of poses (one row each), or a camera's pixels (one row per corner: the pixel
+        error seen at the board's distance, m, in x and y; z not measured).
     sessions : dict of str to SessionFit
         For measurements of several sessions (`Measurements.session`): each session's
         fitted frames with their standard errors, by label in order of appearance
@@ -136,6 +137,9 @@ class Calibration:
         True for coordinates not measured (σ inf: a plane's x and y, see
         `casecal.identification.contact`); their residuals are 0 and count nowhere. None
         when every coordinate was measured.
+    camera : casecal.identification.camera_fit.CameraFit or None
+        For camera measurements: the fitted camera and board poses, the lens, the pixel
+        residuals (px).
     """
 
     method: str
@@ -174,6 +178,7 @@ class Calibration:
     measured: str = "points"
     sessions: dict = field(default_factory=dict)
     unmeasured: np.ndarray | None = None
+    camera: object | None = None
 
     @property
     def success(self) -> bool:

@@ -26,7 +26,8 @@ from .analysis import analyse, represent, selection
 from .audit import Audit, Facts, audit, smoothness
 from .calibration import Calibration
 from .evidence import outside_gain, still_joints
-from .fit import METHODS, check_iterations, verdict
+from .fit import METHODS
+from .fitting import check_iterations, verdict
 from .linalg import Reduction, gauss_newton_step
 from .mirror import second_answers
 from .rounds import MAX_ROUNDS, workspace_poses

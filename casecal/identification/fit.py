@@ -24,7 +24,7 @@ from __future__ import annotations
 import logging
 import time
 from functools import partial
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
 import pandas as pd
@@ -34,12 +34,15 @@ from ..data.measurements import Measurements, broadcast_sigma
 from ..errors import CalibrationError
 from ..model.parameters import select
 from ..model.robot import Robot
+from ..observations.pixels import PixelMeasurements
 from .analysis import represent, selection
 from .audit import audit
-from .calibration import STATUS_MESSAGES, Calibration
+from .calibration import Calibration
+from .camera_fit import identify_camera
 from .contact import check_robot as check_contact_robot
 from .contact import contact_checks, plausible_error
-from .facts import gather, point_rms
+from .facts import gather
+from .fitting import check_iterations, rms_of, shared_problems, verdict
 from .problem import Problem
 from .reference import FALLBACK_NOTE, frame_parameters, frames_fitted
 from .rounds import LOSSES, Settings, fit_in_rounds
@@ -157,6 +160,23 @@ def identify(
     loss_scale = _check_options(method, bounds, prior, loss, loss_scale)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
+    if isinstance(measurements, PixelMeasurements):
+        return _camera(
+            robot,
+            measurements,
+            parameters,
+            method,
+            noise,
+            bounds,
+            prior,
+            loss,
+            **{
+                "max_iterations": max_iterations,
+                "tolerance": tolerance,
+                "truth": truth,
+                "progress": progress,
+            },
+        )
     if measurements.contact:
         if robot.coupling is not None:
             raise CalibrationError(
@@ -246,7 +266,7 @@ def identify(
         frame, frame_note = choose_frame(robot, q, y, sigma, names, np.mean(w**2, axis=1))
     else:  # one instrument frame per session: each base starts from its own rigid fit
         frame, frame_note = FitFrame.identity(), ""
-    make = _shared(
+    make = shared_problems(
         partial(
             Problem,
             q=q,
@@ -263,7 +283,7 @@ def identify(
         names = [n for n in names if n not in held]
     elif frame.is_identity:
         start, start_note = partial_base_start(robot, lambda r, n: make(r, names=n), names)
-    e0 = _rms_of(make(start, names=names), len(names))
+    e0 = rms_of(make(start, names=names), len(names))
     settings = Settings(
         method, max_iterations, tolerance, known, w, loss, loss_scale, bounds, prior, progress
     )
@@ -271,7 +291,7 @@ def identify(
     frames = frame_parameters(names, robot)
     if reference is start and frames and len(frames) < len(names):
         start_note = f"{start_note} {FALLBACK_NOTE}".strip()
-    e_before = _rms_of(make(reference, names=names), len(names))
+    e_before = rms_of(make(reference, names=names), len(names))
     if method != "svd" and not bounds and not prior and reference is not start:
         # the fitted base is a start nearer the minimum. Not the tool or the reflectors:
         # moved off the nominal, a tool point on the flange axis would make wrist
@@ -281,7 +301,7 @@ def identify(
         start = start.with_parameters(
             {n: reference.parameters[n] for n in names if n.startswith("base_")}
         )
-        e0 = _rms_of(make(start, names=names), len(names))
+        e0 = rms_of(make(start, names=names), len(names))
     e_rounds = e_before
     if sessions is not None and sessions.kinds:  # contacts hide the robot's error
         e_rounds = max(e_before, plausible_error(start, names))
@@ -362,9 +382,23 @@ def identify(
     return cal.compare_to(truth) if truth is not None else cal
 
 
-def _rms_of(problem: Problem, k: int) -> float:
-    """`point_rms` of `problem` at its start, measured coordinates only."""
-    return point_rms(problem.point_residuals(np.zeros(k)), problem._unmeasured)
+def _camera(robot, measurements, parameters, method, noise, bounds, prior, loss, **options):
+    """`identify` of camera measurements (`casecal.identification.camera_fit`), refusing
+    the options it does not take."""
+    given = {"noise": noise, "bounds": bounds or None, "prior": prior or None}
+    unsupported = [k for k, v in given.items() if v is not None]
+    if loss != "linear":
+        unsupported.append("loss")
+    if unsupported:
+        raise CalibrationError(
+            f"camera measurements do not take {', '.join(unsupported)} yet; the pixel σ is "
+            "the measurements' sigma_px"
+        )
+    if robot.coupling is not None:
+        raise CalibrationError(
+            "camera calibration of a robot with coupled joints is not supported yet"
+        )
+    return identify_camera(robot, measurements, parameters, method, **options)
 
 
 def _selection(robot: Robot, parameters, sessions) -> list[str]:
@@ -394,39 +428,6 @@ def _coupled(robot: Robot, measurements: Measurements, *args, **options) -> Cali
     )
 
 
-SHARED_PROBLEMS = 3
-"""Problems `_shared` keeps for reuse (they share one memo; each holds its weights)."""
-
-
-def _shared(make):
-    """`make` returning the same `Problem` for the same robot and columns, and Problems
-    that share one memo of evaluations and reductions, so that the rounds, the solver and
-    the audit evaluate a point once (a pass over a million poses costs a second). Lives as
-    long as one `identify` call."""
-    kept: dict = {}
-    memo: dict = {}  # one for all: the same data arrays, keyed by the parameter vector
-
-    def shared(robot, names, kernel_names=None, **other):
-        if other:
-            return make(robot, names=names, kernel_names=kernel_names, **other)
-        at = (robot.structure, robot.vector().tobytes(), tuple(names))
-        key = (*at, tuple(kernel_names or names))
-        problem = kept.pop(key, None)
-        if problem is None:
-            same = [p for k, p in kept.items() if k[:3] == at]  # other columns, same point
-            problem = (
-                same[-1].with_kernel(key[3])
-                if same
-                else make(robot, names=names, kernel_names=kernel_names, memo=memo)
-            )
-        kept[key] = problem  # the latest last
-        while len(kept) > SHARED_PROBLEMS:
-            kept.pop(next(iter(kept)))
-        return problem
-
-    return shared
-
-
 def _representation(calibrated, final, frame, make_world, names, out, se):
     """What each estimate stands for, with the base frame in the instrument's frame."""
     if not frame.is_identity:
@@ -437,28 +438,6 @@ def _representation(calibrated, final, frame, make_world, names, out, se):
     return represent(
         R, names, out.estimated, out.pruned, standard_errors=se, sizes=calibrated.sizes
     )
-
-
-def verdict(checks, solver_status: int, solver_message: str | None) -> tuple[int, str]:
-    """A Calibration's status and message: the audit's verdict over the solver's."""
-    if not checks.passed:
-        first, *more = checks.failures
-        also = f" (also failed: {', '.join(c.name for c in more)})" if more else ""
-        return -2, f"failed the answer audit: {first.name}: {first.text}{also}"
-    if solver_status > 0:
-        return solver_status, solver_message or STATUS_MESSAGES[solver_status]
-    return 6, STATUS_MESSAGES[6]
-
-
-def check_iterations(max_iterations, tolerance) -> tuple[int, float]:
-    """`max_iterations` and `tolerance` as int and float, or a CalibrationError saying why."""
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, Integral):
-        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if max_iterations < 1:
-        raise CalibrationError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    if isinstance(tolerance, bool) or not (isinstance(tolerance, Real) and 0 < tolerance < 1):
-        raise CalibrationError(f"tolerance must be a number between 0 and 1, got {tolerance!r}")
-    return int(max_iterations), float(tolerance)
 
 
 def _check_options(method, bounds, prior, loss, loss_scale) -> float:

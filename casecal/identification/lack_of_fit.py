@@ -93,9 +93,7 @@ def lack_of_fit(problem: Problem, joint_types: str, poses=None, seed: int = 0) -
     if len(poses) > MOST_POSES:
         poses = np.sort(np.random.default_rng(seed).choice(poses, MOST_POSES, replace=False))
     if len(poses) < problem.q.shape[0]:
-        problem = Problem(
-            problem.robot, problem.q[poses], problem.y[poses], problem.w[poses], problem.names
-        )
+        problem = problem.subset(poses)
     x0 = np.zeros(len(problem.names))
     n, rows, points = len(problem.q), problem.w_rows.shape[1], 3 * problem.m
     J = np.zeros((n * points, 0))
@@ -131,14 +129,14 @@ def _explained(A: np.ndarray, r: np.ndarray) -> tuple[float, int]:
 def _columns(problem: Problem, joint_types: str, h: float = 1e-6) -> np.ndarray:
     """The weighted effect on the measured points of each joint error of
     `joint_functions`, shape (N · 3m, B)."""
-    q, robot = problem.q, problem.robot
+    q = problem.q
     n, dof, points = len(q), len(joint_types), 3 * problem.m
     moved = np.empty((n, points, dof))
     for j in range(dof):  # ∂(measured points)/∂q_j by central differences
         step = np.zeros(q.shape[1])
         step[j] = h
-        plus = robot.measured_points(q + step).reshape(n, -1)
-        minus = robot.measured_points(q - step).reshape(n, -1)
+        plus = problem.model_at(q + step)
+        minus = problem.model_at(q - step)
         moved[:, :, j] = (plus - minus) / (2 * h)
     functions = joint_functions(q[:, :dof], joint_types)
     X = np.stack([moved[:, :, j] * values[:, None] for j, values in functions], axis=2)

@@ -155,7 +155,7 @@ def _without(problem, w, full, listed, before) -> tuple[np.ndarray, np.ndarray]:
     from scipy.linalg import solve_triangular
 
     x0 = np.zeros(len(problem.names))
-    sub = _subset(problem, listed)
+    sub = problem.subset(listed)
     A, a = sub.jacobian(x0), sub.residual(x0)
     B = solve_triangular(full.R, A.T, trans="T").T  # A R⁻¹
     M = np.linalg.pinv(np.eye(len(x0)) - B.T @ B, rcond=1e-12, hermitian=True)
@@ -171,20 +171,6 @@ def _without(problem, w, full, listed, before) -> tuple[np.ndarray, np.ndarray]:
             Bp = points[i, 3 * j : 3 * j + 3]
             e2[pose, j] = res[i, j] @ np.linalg.solve(np.eye(3) + Bp @ M @ Bp.T, res[i, j])
     return e2, x
-
-
-def _subset(problem: Problem, poses) -> Problem:
-    """The same robot and parameters, only the measurements of `poses`."""
-    R = None if problem.R is None else problem.R[poses]
-    return Problem(
-        problem.robot,
-        problem.q[poses],
-        problem.y[poses],
-        problem.w[poses],
-        problem.names,
-        orientations=R,
-        w_rot=problem.w_rot,
-    )
 
 
 def _settle(problem: Problem, listed, x: np.ndarray, predicted: float, before) -> np.ndarray:

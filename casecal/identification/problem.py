@@ -128,9 +128,25 @@ class Problem:
         other._weights = object()
         return other
 
+    def subset(self, poses) -> Problem:
+        """The same robot and parameters, only the measurements of `poses`."""
+        return Problem(
+            self.robot,
+            self.q[poses],
+            self.y[poses],
+            self.w[poses],
+            self.names,
+            orientations=None if self.R is None else self.R[poses],
+            w_rot=self.w_rot,
+        )
+
+    def model_at(self, q: np.ndarray) -> np.ndarray:
+        """The robot's modelled measurements at joint values `q` (n, 3m), at the start."""
+        return self.robot.measured_points(q).reshape(len(q), -1)
+
     def restricted(self, names) -> Problem:
         """The same data and kernel for a subset of the parameters (shares the memo)."""
-        other = Problem.__new__(Problem)
+        other = type(self).__new__(type(self))
         other.__dict__.update(self.__dict__)
         other.names = tuple(names)
         other.columns = self.chain.columns(other.names)

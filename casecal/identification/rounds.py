@@ -37,6 +37,7 @@ from ..design.poses import uniform
 from ..errors import CalibrationError
 from ..model.robot import Robot
 from ..model.rotation_chart import deviations_between
+from ..observations.rig import moves_robot
 from .analysis import Observability, analyse, pivot_order
 from .outliers import outlier_poses
 from .problem import Problem
@@ -174,7 +175,8 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         ]
         point, lost = _release(make, point, names, settings, weights, hold, order, base, r)
         frozen.update(dict.fromkeys(lost, FROZEN))
-        J_work = workspace_jacobian(point, q_work, names, full)
+        # what an uncertainty costs the robot: not a camera rig's own poses and lens
+        J_work = workspace_jacobian(point, q_work, names, full) * moves_robot(point, names)
         noise = (
             float(np.sqrt(3 * np.mean(1.0 / measured_weights(settings.w) ** 2)))
             if settings.known

@@ -50,7 +50,7 @@ def apply_pose_deviation(T, delta) -> np.ndarray:
     return out
 
 
-def _skew(a: np.ndarray) -> np.ndarray:
+def skew(a: np.ndarray) -> np.ndarray:
     """[a]× for vectors a (..., 3): matrices (..., 3, 3) with [a]× b = a × b."""
     S = np.zeros((*a.shape, 3))
     S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
@@ -150,10 +150,10 @@ def camera_residuals(
         p = v @ Rc
         to_cam = np.einsum("ji,nkj->nik", Rc, R)  # Rcᵀ Rᵀ, (n, 3, 3)
         # δp_tool = Rᵀ ([w]× δφ − δt)
-        dp_robot = np.einsum("nij,nmjk->nmik", to_cam, _skew(w) @ Jrot[:, None] - Jpos[:, None])
-        dp_camera = np.concatenate([np.broadcast_to(-Rc.T, (n, m, 3, 3)), Rc.T @ _skew(v)], axis=-1)
+        dp_robot = np.einsum("nij,nmjk->nmik", to_cam, skew(w) @ Jrot[:, None] - Jpos[:, None])
+        dp_camera = np.concatenate([np.broadcast_to(-Rc.T, (n, m, 3, 3)), Rc.T @ skew(v)], axis=-1)
         dp_target = np.concatenate(
-            [np.broadcast_to(to_cam[:, None], (n, m, 3, 3)), -to_cam[:, None] @ _skew(cg)[None]],
+            [np.broadcast_to(to_cam[:, None], (n, m, 3, 3)), -to_cam[:, None] @ skew(cg)[None]],
             axis=-1,
         )
     else:
@@ -162,11 +162,11 @@ def camera_residuals(
         u = a + (t - tc)[:, None]
         p = u @ Rc
         # δp_base = δt − [a]× δφ
-        dp_robot = Rc.T @ (Jpos[:, None] - _skew(a) @ Jrot[:, None])
-        dp_camera = np.concatenate([np.broadcast_to(-Rc.T, (n, m, 3, 3)), Rc.T @ _skew(u)], axis=-1)
+        dp_robot = Rc.T @ (Jpos[:, None] - skew(a) @ Jrot[:, None])
+        dp_camera = np.concatenate([np.broadcast_to(-Rc.T, (n, m, 3, 3)), Rc.T @ skew(u)], axis=-1)
         RcR = Rc.T @ R  # (n, 3, 3)
         dp_target = np.concatenate(
-            [np.broadcast_to(RcR[:, None], (n, m, 3, 3)), -RcR[:, None] @ _skew(cg)[None]],
+            [np.broadcast_to(RcR[:, None], (n, m, 3, 3)), -RcR[:, None] @ skew(cg)[None]],
             axis=-1,
         )
     flat = p.reshape(-1, 3)

@@ -1,0 +1,133 @@
+"""Camera measurements: the pixels of a checkerboard's corners in many robot poses.
+
+`PixelMeasurements` is what `casecal.identify` takes for a camera calibration (the camera
+on the flange or fixed, `casecal.observations.simulate.CameraSetup`); `simulate_camera`
+makes them from a true robot and setup. The fit estimates the robot's parameters, the
+camera's and the board's poses and (unless told they are known) the nine intrinsics,
+starting from the nominal `setup` (`casecal.identification.camera_fit`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CalibrationError
+from .simulate import CameraSetup, simulate_pixels
+
+
+@dataclass(frozen=True, eq=False)
+class PixelMeasurements:
+    """Joint values and the corners' pixels seen in each pose.
+
+    Attributes
+    ----------
+    q : ndarray, shape (N, dof)
+        Joint values of the N views, rad (R) or m (P), the controller's.
+    pixels : ndarray, shape (N, corners, 2)
+        Measured (u, v) of every corner of ``setup.board``, px, in
+        `casecal.observations.target.Checkerboard.corners` order; NaN (both u and v) for
+        a corner the detector did not find in that view.
+    setup : CameraSetup
+        The nominal camera: mode, camera and board poses, intrinsics, board. The fit
+        starts here; the poses should be right to centimetres and degrees, the intrinsics
+        to a few percent (a datasheet, or OpenCV's ``calibrateCamera``).
+    sigma_px : float
+        Standard deviation of a pixel coordinate's noise, px (> 0).
+    fit_intrinsics : bool
+        Estimate the intrinsics (default). False: they are known (``setup.intrinsics``
+        from a separate camera calibration) and held.
+    """
+
+    q: np.ndarray
+    pixels: np.ndarray
+    setup: CameraSetup
+    sigma_px: float
+    fit_intrinsics: bool = True
+
+    def __post_init__(self) -> None:
+        q = np.asarray(self.q, dtype=float)
+        uv = np.asarray(self.pixels, dtype=float)
+        if q.ndim != 2 or not np.all(np.isfinite(q)):
+            raise CalibrationError(
+                f"PixelMeasurements: joint values of shape {q.shape}; give (N, dof), all finite"
+            )
+        if not isinstance(self.setup, CameraSetup):
+            raise CalibrationError("PixelMeasurements: setup must be a CameraSetup")
+        m = self.setup.board.n_corners
+        if uv.shape != (len(q), m, 2):
+            raise CalibrationError(
+                f"PixelMeasurements: pixels of shape {uv.shape}; give ({len(q)}, {m}, 2): "
+                f"(u, v) of the board's {m} corners in each of the {len(q)} views"
+            )
+        missing = np.isnan(uv)
+        if np.any(missing[..., 0] != missing[..., 1]) or np.any(np.isinf(uv)):
+            raise CalibrationError(
+                "PixelMeasurements: a corner has one coordinate missing (NaN) and not the other, "
+                "or an infinite one; give both u and v, or NaN for both where it was not found"
+            )
+        if np.any(missing[..., 0].all(axis=1)):
+            first = int(np.flatnonzero(missing[..., 0].all(axis=1))[0])
+            raise CalibrationError(
+                f"PixelMeasurements: view {first} has no corner found; leave such views out"
+            )
+        sigma = self.sigma_px
+        if isinstance(sigma, bool) or not (
+            isinstance(sigma, int | float | np.floating) and math.isfinite(sigma) and sigma > 0
+        ):
+            raise CalibrationError(
+                f"PixelMeasurements: sigma_px = {sigma!r}; give the pixel noise, a number > 0 "
+                "px (a detector's sub-pixel corners: 0.1–0.5 px)"
+            )
+        for name, a in (("q", q), ("pixels", uv)):
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        object.__setattr__(self, "sigma_px", float(sigma))
+        object.__setattr__(self, "fit_intrinsics", bool(self.fit_intrinsics))
+
+    @property
+    def n_poses(self) -> int:
+        """Number of views N."""
+        return len(self.q)
+
+    @property
+    def found(self) -> np.ndarray:
+        """Which corners were found in which view, (N, corners) bool."""
+        return ~np.isnan(self.pixels[..., 0])
+
+    def subset(self, rows) -> PixelMeasurements:
+        """The views `rows` (indices or a boolean mask)."""
+        return PixelMeasurements(
+            self.q[rows], self.pixels[rows], self.setup, self.sigma_px, self.fit_intrinsics
+        )
+
+
+def simulate_camera(
+    robot, q, setup: CameraSetup, sigma_px: float, seed=None, fit_intrinsics: bool = True
+) -> PixelMeasurements:
+    """Pixels a camera would measure of `robot` (the truth) in `setup` (the true camera).
+
+    Parameters
+    ----------
+    robot : casecal.Robot
+        The true robot.
+    q : array-like, shape (N, dof)
+        Joint values, rad (R) or m (P); every view must see the whole board (pick them
+        with `casecal.observations.simulate.select_views`).
+    setup : CameraSetup
+        The true camera; the returned measurements carry it as their nominal: give them
+        another with ``dataclasses.replace(meas, setup=nominal)`` to fit from elsewhere.
+    sigma_px : float
+        Pixel noise σ, px (> 0: the fit weighs by it).
+    seed : int or numpy Generator
+        For the noise.
+
+    Returns
+    -------
+    PixelMeasurements
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    uv = simulate_pixels(robot, q, setup, sigma_px=sigma_px, seed=seed)
+    return PixelMeasurements(q, uv, setup, sigma_px, fit_intrinsics)

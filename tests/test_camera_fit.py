@@ -1,0 +1,183 @@
+"""Camera calibration through `casecal.identify`: pixels as residual rows of the one fit.
+
+A simulated PUMA 560 with mm-level errors, a 7 × 9 checkerboard, σ = 0.3 px, 60 views,
+eye-in-hand and eye-to-hand, fitted from a nominal camera, board and lens that are off by
+millimetres, degrees and pixels. Checked against what nobody here computed: the truth of
+the simulation (every estimate, or the combination it stands for, within its standard
+errors), held-out views (their pixel error at the noise floor), and OpenCV's
+``projectPoints`` of the fitted camera (the residuals the fit reports).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from test_camera import PUMA_Q0, eye_in_hand_setup, eye_to_hand_setup
+
+import casecal as cc
+from casecal.errors import CalibrationError
+from casecal.observations.pixels import PixelMeasurements, simulate_camera
+from casecal.observations.residuals import moved_setup
+from casecal.observations.rig import INTRINSIC_PARAMETERS, rig_robot
+from casecal.observations.simulate import select_views, simulate_pixels
+
+cv2 = pytest.importorskip("cv2")
+
+SIGMA = 0.3  # px
+SETUPS = {"eye_in_hand": eye_in_hand_setup, "eye_to_hand": eye_to_hand_setup}
+OFF = {  # the true camera's offsets from the nominal one
+    "camera_x": 3e-3,
+    "camera_wz": 5e-3,
+    "target_y": -2e-3,
+    "target_wx": 4e-3,
+    "fx": 12.0,
+    "fy": 8.0,
+    "cx": -4.0,
+    "k1": 0.01,
+}
+
+
+@pytest.fixture(scope="module")
+def puma():
+    return cc.load_robot("puma560")
+
+
+def scenario(puma, mode, seed=3, views=60):
+    """(true robot, true setup, nominal setup, measurements from the nominal)."""
+    nominal = SETUPS[mode](puma)
+    rng = np.random.default_rng(seed)
+    dh = [n for n in puma.parameter_names if not n.startswith(("base_", "tool_"))]
+    true_robot = puma.with_deviations({n: rng.normal(0, 1e-3) for n in dh})
+    true_setup = moved_setup(nominal, OFF)
+    q = select_views(puma, views, nominal, seed=1, q_centre=PUMA_Q0, spread=0.3, max_tilt=0.9)
+    meas = simulate_camera(true_robot, q, true_setup, SIGMA, seed=seed + 1)
+    return true_robot, true_setup, nominal, dataclasses.replace(meas, setup=nominal)
+
+
+@pytest.fixture(scope="module", params=sorted(SETUPS))
+def fitted(request, puma):
+    true_robot, true_setup, nominal, meas = scenario(puma, request.param)
+    truth_rig = rig_robot(true_robot, true_setup)
+    cal = cc.identify(puma, meas, "all")
+    truth = truth_rig.deviations_from(rig_robot(puma, nominal), cal.parameters)
+    return cal.compare_to(truth), true_robot, true_setup, nominal, meas
+
+
+def test_a_camera_calibration_recovers_the_truth_within_its_standard_errors(fitted):
+    cal, *_ = fitted
+    assert cal.success, cal.message
+    assert cal.measured == "pixels"
+    assert 0.9 < cal.reduced_chi2 < 1.1
+    assert set(INTRINSIC_PARAMETERS) <= set(cal.estimated)  # a well-spread set sees the lens
+    z = {n: (cal.deviations[n] - cal.true_value(n)) / cal.standard_errors[n] for n in cal.estimated}
+    worst = max(z, key=lambda n: abs(z[n]))
+    assert abs(z[worst]) < 4.5, (worst, z[worst])
+    # and the fit moved: the truth was many standard errors from the start
+    far = max(abs(cal.true_value(n)) / cal.standard_errors[n] for n in cal.estimated)
+    assert far > 20
+
+
+def test_held_out_views_are_at_the_noise_floor(fitted, puma):
+    """The calibrated robot (its own frames) with the fitted camera predicts new views as
+    well as the noise allows; the nominal robot with only the poses fitted does not."""
+    cal, true_robot, true_setup, nominal, _ = fitted
+    q = select_views(puma, 30, nominal, seed=11, q_centre=PUMA_Q0, spread=0.3, max_tilt=0.9)
+    seen = simulate_pixels(true_robot, q, true_setup, sigma_px=SIGMA, seed=12)
+    after = np.sqrt(np.mean((seen - simulate_pixels(cal.robot, q, cal.camera.setup)) ** 2))
+    before = np.sqrt(np.mean((seen - simulate_pixels(puma, q, cal.camera.setup_before)) ** 2))
+    assert after < 1.1 * SIGMA
+    assert before > 1.5 * SIGMA
+    assert cal.robot.name == puma.name and cal.robot.base == puma.base  # the user's frames
+
+
+def test_reported_pixel_residuals_are_opencvs(fitted):
+    """The residuals the fit reports are the measured pixels minus ``cv2.projectPoints`` of
+    the fitted camera and board through the calibrated robot."""
+    cal, *_, meas = fitted
+    setup = cal.camera.setup
+    K, dist = setup.intrinsics.to_opencv()
+    for i in (0, 17, 59):
+        T = cal.robot.fk(meas.q[i])
+        if setup.mode == "eye_in_hand":
+            M = np.linalg.inv(T @ setup.camera) @ setup.target
+        else:
+            M = np.linalg.inv(setup.camera) @ T @ setup.target
+        corners = setup.board.corners()
+        uv, _ = cv2.projectPoints(corners, cv2.Rodrigues(M[:3, :3])[0], M[:3, 3], K, dist)
+        expected = meas.pixels[i] - uv.reshape(-1, 2)
+        np.testing.assert_allclose(cal.camera.pixel_residuals[i], expected, atol=1e-6)
+    rms = np.sqrt(np.mean(cal.camera.pixel_residuals**2))
+    assert rms == pytest.approx(cal.camera.rms_px)
+    assert 0.9 * SIGMA < rms < 1.1 * SIGMA
+
+
+def test_the_summary_says_what_the_frames_are_and_what_is_blind(fitted):
+    cal, *_ = fitted
+    text = str(cal.summary())
+    assert "Camera calibration" in text and "camera_fx" in text
+    # the camera's pose takes the first joint's offset and height: blind, said by name
+    assert {"theta1", "d1"} <= set(cal.unidentifiable)
+    assert "theta1" in text.split("blind", 1)[1]
+
+
+def test_missing_corners_are_no_observations(puma):
+    _, _, _, meas = scenario(puma, "eye_to_hand", views=40)
+    uv = meas.pixels.copy()
+    uv[3, :10] = np.nan  # ten corners of one view not found
+    uv[7, 5] = np.nan
+    full = cc.identify(puma, meas, "all")
+    holed = cc.identify(puma, dataclasses.replace(meas, pixels=uv), "all")
+    assert holed.success, holed.message
+    assert holed.dof_residual == full.dof_residual - 2 * 11
+    assert np.isnan(holed.camera.pixel_residuals[3, :10]).all()
+    assert np.isfinite(holed.camera.pixel_residuals[3, 10:]).all()
+
+
+def test_known_intrinsics_are_held(puma):
+    _, true_setup, nominal, meas = scenario(puma, "eye_in_hand", views=40)
+    lens = dataclasses.replace(nominal, intrinsics=true_setup.intrinsics)
+    known = dataclasses.replace(meas, setup=lens, fit_intrinsics=False)
+    cal = cc.identify(puma, known, "all")
+    assert cal.success, cal.message
+    assert not set(INTRINSIC_PARAMETERS) & set(cal.parameters)
+    assert cal.camera.setup.intrinsics == true_setup.intrinsics
+
+
+def test_a_camera_calibration_refuses_what_it_cannot_do(puma):
+    _, _, nominal, meas = scenario(puma, "eye_to_hand", views=10)
+    with pytest.raises(CalibrationError, match="do not take loss"):
+        cc.identify(puma, meas, loss="huber")
+    with pytest.raises(CalibrationError, match="do not take noise"):
+        cc.identify(puma, meas, noise=1e-4)
+    with pytest.raises(CalibrationError, match="joint values per view"):
+        cc.identify(puma, dataclasses.replace(meas, q=meas.q[:, :5]))
+    flipped = dataclasses.replace(nominal, camera=nominal.camera @ np.diag([1.0, -1.0, -1.0, 1.0]))
+    with pytest.raises(CalibrationError, match="behind the camera"):
+        cc.identify(puma, dataclasses.replace(meas, setup=flipped))
+    with pytest.raises(CalibrationError, match="sigma_px"):
+        PixelMeasurements(meas.q, meas.pixels, nominal, 0.0)
+    backwards = meas.pixels.copy()
+    backwards[[2, 5]] = backwards[[2, 5], ::-1]  # a 7 × 9 board read after a half turn
+    with pytest.raises(CalibrationError, match=r"2 of 10 views \(first: \[2, 5\]\).*reverse order"):
+        cc.identify(puma, dataclasses.replace(meas, pixels=backwards))
+    half = meas.pixels.copy()
+    half[0, 0, 0] = np.nan
+    with pytest.raises(CalibrationError, match="one coordinate missing"):
+        PixelMeasurements(meas.q, half, nominal, SIGMA)
+
+
+def test_a_board_turned_about_one_axis_fails_and_says_what_it_cannot_see(puma):
+    """Only joint 6 turns, the board square to the camera: the lens's scale and most of the
+    robot are blind, and the fit says so rather than returning numbers."""
+    true_robot, true_setup, nominal, _ = scenario(puma, "eye_to_hand")
+    q = np.repeat(PUMA_Q0[None], 30, axis=0)
+    q[:, 5] += np.linspace(-0.6, 0.6, 30)
+    meas = dataclasses.replace(
+        simulate_camera(true_robot, q, true_setup, SIGMA, seed=2), setup=nominal
+    )
+    cal = cc.identify(puma, meas)
+    assert not cal.success
+    assert "in every pose" in cal.message  # the joints that never moved, by value
+    assert {"camera_fx", "camera_fy", "a2", "d4"} <= set(cal.unidentifiable)
