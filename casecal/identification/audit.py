@@ -297,6 +297,11 @@ def _no_growth(f: Facts) -> Check:
     return Check("residual did not grow", ok, text)
 
 
+SMALL_CHI2 = 0.25
+"""A reduced χ² below this (residuals under half the stated σ) passes the noise check's
+loose lower bound but is said in words: the standard errors scale with the σ."""
+
+
 def _noise(f: Facts) -> Check:
     name = "residual consistent with the noise"
     if f.dof <= 0:
@@ -330,6 +335,12 @@ def _noise(f: Facts) -> Check:
                 f": the residuals are {1 / np.sqrt(chi2):.3g} times smaller than the stated "
                 "σ, more than chance allows: σ is too large (millimetres given as metres?), "
                 "and parameters held as below the noise may matter; state the instrument's σ"
+            )
+        elif chi2 < SMALL_CHI2:  # within the loose bound, still worth a word
+            text += (
+                f": the residuals are {1 / np.sqrt(chi2):.3g} times smaller than the stated "
+                "σ; if that is not the instrument's own, the standard errors are as many "
+                "times too large"
             )
     else:
         ok = rms <= PLAUSIBLE_NOISE

@@ -35,6 +35,13 @@ from .pixel_problem import PixelProblem, View
 from .reference import FRAME_PREFIXES, frame_parameters, frames_fitted
 from .rounds import Settings, fit_in_rounds
 from .solvers import SOLVERS
+from .summary import outliers_lead, stand_out
+
+SCALE = (
+    "The board's spacing sets the scale: every length is in units of its square, and a board "
+    "printed 1% large makes every length of the arm 1% long with no residual to show it; "
+    "measure the printed board over many squares."
+)
 
 FRAMES = ("base_*", "tool_*")
 """The camera's and the board's poses (the rig's frames): always estimated."""
@@ -109,7 +116,14 @@ def pixel_arrays(robot: Robot, measurements: PixelMeasurements):
 
 REVERSED = 3.0
 """A view whose corners lie this many times nearer the nominal prediction read backwards
-than forwards has them in reverse order."""
+than forwards has them in reverse order (and the other way round, forward)."""
+
+FORWARD_SHARE = 0.75
+"""The share of views that must read clearly forward for the others to be judged."""
+
+FAR_PX = 20.0
+"""RMS pixel error (px) of the camera and board poses fitted to the nominal robot and lens
+past which a failed fit names the gross causes (units, mode, board, order) first."""
 
 
 def _check_order(measurements: PixelMeasurements, predicted: np.ndarray) -> None:
@@ -117,23 +131,30 @@ def _check_order(measurements: PixelMeasurements, predicted: np.ndarray) -> None
 
     A detector returns a board whose rows + columns are even in either order
     (`casecal.observations.target.Checkerboard.symmetric`); a view read backwards is
-    hundreds of pixels off everywhere, which the fit would take for a gross error.
+    hundreds of pixels off everywhere, which the fit would take for a gross error. Judged
+    only where most views clearly read forward at the nominal camera: a nominal camera
+    rolled by half a turn reads every view backwards, which the fit of its pose mends.
     """
     if not measurements.setup.board.symmetric:
         return
-    uv, found = measurements.pixels, measurements.found
-    whole = found.all(axis=1)
-    ahead = np.linalg.norm(uv - predicted, axis=2)
-    behind = np.linalg.norm(uv[:, ::-1] - predicted, axis=2)
-    reversed_ = whole & (np.median(behind, axis=1) * REVERSED < np.median(ahead, axis=1))
-    if reversed_.any():
-        views = np.flatnonzero(reversed_)
-        raise CalibrationError(
-            f"{views.size} of {len(uv)} views (first: {views[:5].tolist()}) have their corners "
-            "in reverse order: the board looks the same after a half turn, and a detector "
-            "returns either order; put each view's corners in Checkerboard.corners order "
-            "(reverse those views' rows), or use a board whose rows + columns are odd"
-        )
+    uv = measurements.pixels
+    both = measurements.found & measurements.found[:, ::-1]  # corners found either way
+    ahead = np.where(both, np.linalg.norm(uv - predicted, axis=2), np.nan)
+    behind = np.where(both, np.linalg.norm(uv[:, ::-1] - predicted, axis=2), np.nan)
+    with np.errstate(all="ignore"):
+        ahead, behind = np.nanmedian(ahead, axis=1), np.nanmedian(behind, axis=1)
+    forward = ahead * REVERSED < behind
+    reversed_ = behind * REVERSED < ahead
+    if not reversed_.any() or forward.sum() < FORWARD_SHARE * len(uv):
+        return
+    views = np.flatnonzero(reversed_)
+    raise CalibrationError(
+        f"{views.size} of {len(uv)} views (first: {views[:5].tolist()}) have their corners in "
+        "reverse order while the others read forward: the board looks the same after a half "
+        "turn, and a detector returns either order; put each view's corners in "
+        "Checkerboard.corners order (reverse those views' rows), or use a board whose rows + "
+        "columns are odd"
+    )
 
 
 def _what(mode: str, which: str) -> str:
@@ -221,6 +242,10 @@ def identify_camera(
     got = gather(make, rig, start, reference, names, out, settings, e0, e_before)
     checks = audit(got.facts)
     status, message = verdict(checks, out.solver_status, out.message)
+    model_error = bool(checks.failures) and checks.failures[0].cause
+    lead = status < 0 and outliers_lead(got.outliers, len(measurements.q)) and not model_error
+    if lead:  # the likelier cause leads, as for a tracker's fit
+        message = f"{stand_out(got.outliers, 'linear', 'pixels')}; {message}"
     x0 = np.zeros(len(out.estimated))
     cov, se = got.covariance, dict.fromkeys(names, float("nan"))
     se.update(zip(out.estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
@@ -232,6 +257,8 @@ def identify_camera(
         pixel_residuals_before=pixel_residuals(before, np.zeros(len(names))),
         sigma_px=measurements.sigma_px,
     )
+    if status < 0 and camera.rms_px_before > FAR_PX:
+        message = f"{gross_causes(camera.rms_px_before)}; {message}"
     final = got.at_end if out.end_analysis is not out.start_analysis else make(rig, names=names)
     cal = Calibration(
         method=method,
@@ -253,6 +280,7 @@ def identify_camera(
         wall_time=time.perf_counter() - t0,
         start_note=camera_note(measurements.setup.mode),
         outliers=got.outliers,
+        outliers_lead=lead,
         audit=checks,
         solver_status=out.solver_status,
         representation=represent(
@@ -277,16 +305,27 @@ def identify_camera(
     return cal.compare_to(truth) if truth is not None else cal
 
 
+def gross_causes(rms_px: float) -> str:
+    """Words for a camera fit that failed far from its data."""
+    return (
+        "even with the camera's and the board's poses fitted, the nominal robot and lens miss "
+        f"the corners by {rms_px:.3g} px RMS: check the joint values' units (rad, not "
+        "degrees), the mode (eye_in_hand: camera on the flange), Checkerboard(rows, cols) "
+        "against OpenCV's patternSize=(cols, rows), the corners' order and (u, v) (u along "
+        "the image's rows)"
+    )
+
+
 def camera_note(mode: str) -> str:
     """What the rig's frame parameters stand for, in words."""
     if mode == "eye_to_hand":
         return (
             "Camera calibration, eye-to-hand: base_* is the robot's base seen from the camera "
             "(T_camera←base), tool_* the board on the flange (T_flange←board); camera_* the "
-            "lens. Residuals are pixels seen at the board's distance (object space, mm)."
+            f"lens. Residuals are pixels seen at the board's distance (object space, mm). {SCALE}"
         )
     return (
         "Camera calibration, eye-in-hand: base_* is the robot's base seen from the board "
         "(T_board←base), tool_* the camera on the flange (T_flange←camera); camera_* the "
-        "lens. Residuals are pixels seen at the board's distance (object space, mm)."
+        f"lens. Residuals are pixels seen at the board's distance (object space, mm). {SCALE}"
     )

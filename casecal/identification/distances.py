@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -20,18 +21,19 @@ from ..data.files import _numbers, read_joints, read_table
 from ..data.units import distances_at_the_door
 from ..design.poses import rng_from
 from ..errors import CalibrationError
-from ..model import kinematics
 from ..model.robot import Robot, check_joint_values
 from .analysis import analyse, represent, selection
 from .audit import Audit, Facts, audit, smoothness
 from .calibration import Calibration
+from .distance_problem import DistanceProblem
 from .evidence import outside_gain, still_joints
 from .fit import METHODS
-from .fitting import check_iterations, verdict
-from .linalg import Reduction, gauss_newton_step
+from .fitting import check_iterations, rms_of, shared_problems, verdict
+from .linalg import gauss_newton_step
 from .mirror import second_answers
-from .rounds import MAX_ROUNDS, workspace_poses
-from .solvers import ROUNDING, SOLVERS, floor_cost
+from .rank import held_gain
+from .rounds import Settings, fit_in_rounds, workspace_poses
+from .solvers import ROUNDING, floor_cost
 from .uncertainty import uncertainty
 
 
@@ -158,52 +160,6 @@ def write_distance_csv(pairs_path, measurements: DistanceMeasurements) -> None:
     write_atomic(pairs_path, df.to_csv(index=False, float_format="%.17g", lineterminator="\n"))
 
 
-class _DistanceProblem:
-    """Weighted distance residuals and Jacobians of the deviations of chosen parameters."""
-
-    def __init__(self, robot: Robot, m: DistanceMeasurements, w: np.ndarray, names):
-        self.robot, self.m, self.names = robot, m, tuple(names)
-        self.w_flat = w
-        self.q = m.q
-        self.y = m.distances[:, None]  # for the solvers' rounding floor
-
-    def restricted(self, names):
-        return _DistanceProblem(self.robot, self.m, self.w_flat, names)
-
-    def _robot(self, x):
-        return self.robot.with_deviations(
-            dict(zip(self.names, np.asarray(x).tolist(), strict=True))
-        )
-
-    def _geometry(self, x):
-        p = self._robot(x).position(self.q)
-        v = p[self.m.pairs[:, 0]] - p[self.m.pairs[:, 1]]
-        return v, np.linalg.norm(v, axis=1)
-
-    def residual(self, x, ahead=False):
-        """Weighted distance residuals; `ahead` as `Problem.residual` (pairs are few:
-        nothing to evaluate ahead)."""
-        _, d = self._geometry(x)
-        return (self.m.distances - d) * self.w_flat
-
-    def jacobian(self, x):
-        v, d = self._geometry(x)
-        u = v / np.maximum(d, 1e-300)[:, None]
-        # exact in x: the deviations' columns about the start, at start + x (`_robot`)
-        chain = kinematics.chain(self.robot.structure)
-        columns = chain.columns(self.names)
-        p0 = self.robot.vector()
-        p = p0.copy()
-        p[list(columns)] += x
-        J = chain.evaluate("position_jacobian", self.q, p, columns, anchor=p0)
-        Jd = np.einsum("pi,pik->pk", u, J[self.m.pairs[:, 0]] - J[self.m.pairs[:, 1]])
-        return Jd * self.w_flat[:, None]
-
-    def reduced(self, x, r=None, exact=True) -> Reduction:
-        """The weighted ``[J | r]`` at `x` as the solvers take it (pairs are few: whole)."""
-        return Reduction.of(self.jacobian(x), self.residual(x) if r is None else r)
-
-
 def identify_distances(
     robot: Robot,
     measurements: DistanceMeasurements,
@@ -245,8 +201,10 @@ def identify_distances(
     known = bool(np.all(measurements.sigma > 0))
     w = 1.0 / measurements.sigma if known else np.ones(measurements.n_pairs)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)
-    full = _DistanceProblem(robot, measurements, w, names)
-    obs = analyse(full.jacobian(np.zeros(len(names))), names, measurements.n_pairs)
+    make = shared_problems(_maker(measurements.q, measurements.pairs, measurements.distances, w))
+    full = make(robot, names)
+    r0, J0 = measured_rows(full, np.zeros(len(names)))
+    obs = analyse(J0, names, measurements.n_pairs)
     if obs.rank >= measurements.n_pairs and len(names) > obs.rank:
         raise CalibrationError(
             f"{measurements.n_pairs} distances are fewer than the {len(names)} parameters asked "
@@ -254,24 +212,33 @@ def identify_distances(
         )
     if not obs.base_parameters:
         raise CalibrationError("none of the asked-for parameters changes a measured distance")
-    fit = _fit_in_rounds(robot, measurements, w, names, obs, method, max_iterations, tolerance)
-    problem = _DistanceProblem(fit.robot, measurements, w, fit.estimated)
+    # distances' own ways (`Settings`): no damped crawl where a round stalls, frames no first
+    settings = Settings(
+        method,
+        max_iterations,
+        tolerance,
+        known,
+        full.w,
+        damped_after_stall=False,
+        frames_first=False,
+    )
+    fit = fit_in_rounds(make, robot, names, settings, rms_of(full, len(names)))
+    problem = make(fit.robot, list(fit.estimated))
+    full_end = make(fit.robot, names)
+    end = full_end.reduced(np.zeros(len(names)))  # where the fit ended, every asked-for column
     x0 = np.zeros(len(fit.estimated))
-    r, J = problem.residual(x0), problem.jacobian(x0)
-    r0 = full.residual(np.zeros(len(names)))
+    r, J = measured_rows(problem, x0)
     cov, se = uncertainty(J, r, known, names, fit.estimated)
     deviations = fit.robot.deviations_from(robot, names)  # rotations: not differences
     outside = [n for n in robot.parameter_names if n not in names]
-    unasked = outside_gain(
-        _DistanceProblem(fit.robot, measurements, w, [*fit.estimated, *outside]), fit.estimated
-    )
+    unasked = outside_gain(make(fit.robot, [*fit.estimated, *outside]), fit.estimated)
     q_pairs = np.hstack(
         [measurements.q[measurements.pairs[:, 0]], measurements.q[measurements.pairs[:, 1]]]
     )
     floor = floor_cost(problem, ROUNDING)
     # distances cannot see a reflection: a planar arm's mirror image fits them too
     second = second_answers(
-        lambda at, which: _DistanceProblem(at, measurements, w, which),
+        make,
         fit.robot,
         robot,
         names,
@@ -288,7 +255,7 @@ def identify_distances(
     )
     checks = audit(
         Facts(
-            solver_status=fit.status,
+            solver_status=fit.solver_status,
             solver_message=fit.message,
             cost_start=0.5 * float(r0 @ r0),
             cost_final=0.5 * float(r @ r),
@@ -312,19 +279,22 @@ def identify_distances(
             outside_visible=unasked.n_visible,
             outside_leading=unasked.leading,
             blind_here=_blind_only_here(
-                robot if method == "svd" else fit.robot, names, fit.estimated
+                robot if method == "svd" else fit.robot, names, fit.estimated, fit.pruned
             ),
             still=still_joints(measurements.q, robot),
+            unsupported=fit.unsupported,
+            held=tuple(fit.pruned),
+            held_gain=held_gain(end, names, fit.estimated, fit.pruned) if fit.pruned else 0.0,
         )
     )
     checks = Audit((*checks.checks, second.check))
-    status, message = verdict(checks, fit.status, fit.message)
+    status, message = verdict(checks, fit.solver_status, fit.message)
     if second.check.passed is False:
         # the second answer explains a prediction that fails with it: name it first
         others = [c.name for c in checks.failures if c is not second.check]
         also = f" (also failed: {', '.join(others)})" if others else ""
         message = f"failed the answer audit: {second.check.name}: {second.check.text}{also}"
-    at_end = _DistanceProblem(fit.robot, measurements, w, names)
+    at_end = measured_rows(full_end, np.zeros(len(names)))[1]
     cal = Calibration(
         method=method,
         nominal=robot,
@@ -344,11 +314,13 @@ def identify_distances(
         sigma_known=known,
         wall_time=time.perf_counter() - t0,
         audit=checks,
-        solver_status=fit.status,
-        representation=represent(at_end.jacobian(np.zeros(len(names))), names, fit.estimated),
+        solver_status=fit.solver_status,
+        representation=represent(at_end, names, fit.estimated),
         start_observability=obs,
         rounds=fit.rounds,
         joined=tuple(n for n in fit.estimated if n not in obs.base_parameters),
+        pruned=fit.pruned,
+        frozen=fit.frozen,
         measured="distances",
     )
     return cal.compare_to(truth) if truth is not None else cal
@@ -358,75 +330,38 @@ WORKSPACE_PAIRS = 800
 """Pairs among the workspace poses on which `_blind_only_here` looks."""
 
 
-def _blind_only_here(robot: Robot, names, estimated) -> tuple[str, ...]:
+def _blind_only_here(robot: Robot, names, estimated, pruned=()) -> tuple[str, ...]:
     """Asked-for parameters the measured pairs cannot tell from the estimated ones but
     pairs across the joint ranges would (a joint that never moved): the distance twin of
-    `casecal.identification.evidence.blind_only_here`. Without joint limits, none."""
-    held = [n for n in names if n not in estimated]
+    `casecal.identification.evidence.blind_only_here`. Without joint limits, none. Those
+    held because the noise hides them (`pruned`) are not blind: the held-parameter check
+    judges them."""
+    held = [n for n in names if n not in estimated and n not in pruned]
     q_work = workspace_poses(robot)
     if q_work is None or not held:
         return ()
     pairs = random_pairs(len(q_work), WORKSPACE_PAIRS, seed=0)
-    ones = np.ones(len(pairs))
-    work = DistanceMeasurements(q_work, pairs, ones, ones)  # distances unused: Jacobian only
-    J = _DistanceProblem(robot, work, ones, list(names)).jacobian(np.zeros(len(names)))
+    ones = np.ones(len(pairs))  # distances unused: the Jacobian only
+    work = _maker(q_work, pairs, ones, ones)(robot, names=names)
+    J = measured_rows(work, np.zeros(len(names)))[1]
     elsewhere = analyse(J, names, len(pairs), prefer=list(estimated)).base_parameters
     return tuple(n for n in held if n in elsewhere)
 
 
-@dataclass(frozen=True)
-class _Rounds:
-    robot: Robot
-    estimated: tuple[str, ...]
-    status: int
-    message: str | None
-    iterations: int
-    history: tuple[float, ...]
-    rounds: int
-    settled: bool
-    end_analysis: object
+def _maker(q, pairs, distances, w):
+    """``make(robot, names, kernel_names=None, memo=None)`` of the `DistanceProblem` of
+    `distances` (P,) m between the tool points of `pairs` (P, 2) of poses `q`, weights
+    `w` (P,) 1/m."""
+    y = np.zeros((len(pairs), 1, 3))
+    y[:, 0, 0] = distances
+    weights = np.zeros((len(pairs), 3))
+    weights[:, 0] = w
+    return partial(DistanceProblem, q=q[pairs[:, 0]], y=y, w=weights, poses=q, pairs=pairs)
 
 
-def _fit_in_rounds(robot, measurements, w, names, obs, method, max_iterations, tolerance):
-    """Fit the base set; where the fit ended, add what has become visible, and fit again.
-
-    The rounds of `casecal.identification.rounds` without its noise-aware rank: a tool
-    point off the wrist axes makes the wrist angles visible only once it has been fitted.
-    A parameter blind where the fit ended keeps the value it was fitted to while visible.
-    """
-    point, estimated = robot, list(obs.base_parameters)
-    iterations, history, settled, status, message = 0, [], False, 0, None
-    end, rounds, seen = obs, 0, set()
-    while rounds < MAX_ROUNDS:
-        rounds += 1
-        problem = _DistanceProblem(point, measurements, w, estimated)
-        x, its, status, hist, message = SOLVERS[method](
-            problem, np.zeros(len(estimated)), max_iterations=max_iterations, tolerance=tolerance
-        )
-        point, iterations = problem._robot(x), iterations + its
-        history += list(hist) if not history else list(hist[1:])
-        if method == "svd" or status < 0:
-            settled = True
-            break
-        at = _DistanceProblem(point, measurements, w, names)
-        end = analyse(
-            at.jacobian(np.zeros(len(names))), names, measurements.n_pairs, prefer=estimated
-        )
-        base = [n for n in names if n in end.base_parameters]
-        if set(base) <= set(estimated) or frozenset(base) in seen:
-            settled = set(base) <= set(estimated)
-            estimated = [n for n in estimated if n in base] if settled else estimated
-            break
-        seen.add(frozenset(base))
-        estimated = base
-    return _Rounds(
-        point,
-        tuple(estimated),
-        status,
-        message,
-        iterations,
-        tuple(float(h) for h in history),
-        rounds,
-        settled,
-        end,
-    )
+def measured_rows(problem: DistanceProblem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted residuals (P,) and Jacobian (P, k) of the distances alone (the rows a
+    `DistanceProblem` carries for the coordinates it does not measure left out)."""
+    n = len(problem.q)
+    r = problem.residual(x).reshape(n, 3)[:, 0]
+    return r, problem.jacobian(x).reshape(n, 3, -1)[:, 0]

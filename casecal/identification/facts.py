@@ -233,7 +233,8 @@ def _inliers(problem: Problem, outliers) -> tuple[float, int, float, int]:
     r = problem.residual(x0).reshape(len(problem.q), -1)[keep].ravel()
     unmeasured = None if problem._unmeasured is None else problem._unmeasured[keep]
     rms = point_rms(problem.point_residuals(x0)[keep], unmeasured)
-    return 0.5 * float(r @ r), r.size - len(x0), rms, len(outliers)
+    rows = np.count_nonzero(problem.w_rows[keep])  # coordinates not measured: no rows
+    return 0.5 * float(r @ r), rows - len(x0), rms, len(outliers)
 
 
 def point_rms(point_residuals: np.ndarray, unmeasured: np.ndarray | None = None) -> float:

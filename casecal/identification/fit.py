@@ -160,22 +160,35 @@ def identify(
     loss_scale = _check_options(method, bounds, prior, loss, loss_scale)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     bounds, prior = _check_bounds(bounds or {}), _check_prior(prior or {})
+    if not isinstance(robot, Robot):
+        raise CalibrationError(
+            f"identify takes a Robot, got {type(robot).__name__}; load one first, e.g. "
+            "cc.load_robot('puma560') or cc.load_robot('robot.urdf')"
+        )
     if isinstance(measurements, PixelMeasurements):
-        return _camera(
-            robot,
-            measurements,
-            parameters,
-            method,
-            noise,
-            bounds,
-            prior,
-            loss,
-            **{
-                "max_iterations": max_iterations,
-                "tolerance": tolerance,
-                "truth": truth,
-                "progress": progress,
-            },
+        given = {
+            "noise": noise,
+            "bounds": bounds or None,
+            "prior": prior or None,
+            "orientation_sigma": orientation_sigma,
+            "per_session": per_session,
+        }
+        unsupported = [k for k, v in given.items() if v is not None]
+        unsupported += ["loss"] if loss != "linear" else []
+        if unsupported:
+            raise CalibrationError(
+                f"camera measurements do not take {', '.join(unsupported)} yet; the pixel σ "
+                "is the measurements' sigma_px"
+            )
+        if robot.coupling is not None:
+            raise CalibrationError(
+                "camera calibration of a robot with coupled joints is not supported yet; "
+                "calibrate robot.uncoupled() with the model's joint values "
+                "(robot.model_joints(q)) instead"
+            )
+        options = {"max_iterations": max_iterations, "tolerance": tolerance, "truth": truth}
+        return identify_camera(
+            robot, measurements, parameters, method, progress=progress, **options
         )
     if measurements.contact:
         if robot.coupling is not None:
@@ -380,25 +393,6 @@ def identify(
         unmeasured=None if np.all(measured) else np.repeat(~measured, y.shape[1], axis=0),
     )
     return cal.compare_to(truth) if truth is not None else cal
-
-
-def _camera(robot, measurements, parameters, method, noise, bounds, prior, loss, **options):
-    """`identify` of camera measurements (`casecal.identification.camera_fit`), refusing
-    the options it does not take."""
-    given = {"noise": noise, "bounds": bounds or None, "prior": prior or None}
-    unsupported = [k for k, v in given.items() if v is not None]
-    if loss != "linear":
-        unsupported.append("loss")
-    if unsupported:
-        raise CalibrationError(
-            f"camera measurements do not take {', '.join(unsupported)} yet; the pixel σ is "
-            "the measurements' sigma_px"
-        )
-    if robot.coupling is not None:
-        raise CalibrationError(
-            "camera calibration of a robot with coupled joints is not supported yet"
-        )
-    return identify_camera(robot, measurements, parameters, method, **options)
 
 
 def _selection(robot: Robot, parameters, sessions) -> list[str]:

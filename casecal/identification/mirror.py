@@ -170,7 +170,7 @@ def second_answers(
         known=known,
         allowed=max(predicted, noise_rms, 1e-9),
         predicted=predicted,
-        n_rows=make(fitted, []).residual(np.zeros(0)).size,
+        n_rows=int(np.count_nonzero(make(fitted, []).w_flat)),
     )
     solve = _solver(make, method, max_iterations, tolerance)
     mirror, miss = _mirror(make, fitted, names, estimated, q_all, solve)
@@ -300,7 +300,7 @@ def _solver(make, method, max_iterations, tolerance):
         x = solver(
             problem, np.zeros(len(names)), max_iterations=max_iterations, tolerance=tolerance
         )[0]
-        return problem._robot(x)
+        return problem.robot_at(x)
 
     return solve
 

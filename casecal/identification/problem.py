@@ -140,6 +140,12 @@ class Problem:
             w_rot=self.w_rot,
         )
 
+    def robot_at(self, x: np.ndarray) -> Robot:
+        """The robot whose deviations of `names` from this problem's robot are `x`."""
+        return self.robot.with_deviations(
+            dict(zip(self.names, np.asarray(x).tolist(), strict=True))
+        )
+
     def model_at(self, q: np.ndarray) -> np.ndarray:
         """The robot's modelled measurements at joint values `q` (n, 3m), at the start."""
         return self.robot.measured_points(q).reshape(len(q), -1)

@@ -65,6 +65,15 @@ class Settings:
     prior: dict = field(default_factory=dict)
     progress: Callable[[str], None] | None = None
     """Called with a line on each iteration of a long fit (the caller decides to show it)."""
+    damped_after_stall: bool = True
+    """Whether Levenberg-Marquardt goes on where Gauss-Newton stalls within a round. Off
+    for distances: where a planar arm's fit stalls on its flat point, the damped steps
+    crawl along the blind tilts to far values, and the next round's look at the
+    identifiable set (another base set there) is what moves it on."""
+    frames_first: bool = True
+    """Whether the frames are offered to the base set first (`pivot_order`: a frame absorbs
+    what duplicates it exactly, as a tracker's points see it). Off for distances, which
+    see no base frame and whose tool offsets the analysis orders like any parameter."""
 
 
 @dataclass(frozen=True)
@@ -144,7 +153,8 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
     hold = start.parameters
     start_analysis = check_analysis(make(start, names=names))
     q_work = workspace_poses(start)
-    order = [names[i] for i in pivot_order(names) if names[i] in start_analysis.base_parameters]
+    offered = pivot_order(names) if settings.frames_first else range(len(names))
+    order = [names[i] for i in offered if names[i] in start_analysis.base_parameters]
     point, weights = start, np.ones((start_analysis.n_poses, make(start, names=names).m))
     iterations, history, pruned, frozen, seen, protected = 0, [], {}, {}, [], set()
     end_analysis, settled, restarted = start_analysis, False, False
@@ -170,7 +180,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
         visible = [n for n in order if n in base]
         visible += [
             names[i]
-            for i in pivot_order(names)
+            for i in offered
             if names[i] in base and names[i] not in order and names[i] not in pruned
         ]
         point, lost = _release(make, point, names, settings, weights, hold, order, base, r)
@@ -360,7 +370,7 @@ def _solve_round(make, point, names, estimated, settings: Settings, weights, hol
         if 0.5 * r @ r <= floor_cost(problem):  # nothing left to fit (a later round)
             return point, iterations, 4, history or [0.5 * r @ r], None, weights
         x, its, status, hist, message = solver(problem, x, **kwargs)
-        if settings.method == "gauss-newton" and status in (0, 3):
+        if settings.method == "gauss-newton" and status in (0, 3) and settings.damped_after_stall:
             # stalled in a curved valley: Levenberg-Marquardt's damping goes on from here
             x, more, status, tail, message = SOLVERS["lm"](problem, x, **kwargs)
             its, hist = its + more, hist + tail[1:]

@@ -63,7 +63,7 @@ many residual variances (well within the audit's bar); otherwise LM takes over."
 
 def _variance(problem: Problem, cost: float) -> float:
     """The residual variance (in the cost's units) at `cost`: 2 cost / (rows - k)."""
-    dof = problem.w_flat.size - len(problem.names)
+    dof = np.count_nonzero(problem.w_flat) - len(problem.names)  # rows not measured: none
     return 2.0 * cost / max(dof, 1)
 
 

@@ -135,14 +135,21 @@ def outliers_lead(outliers, n_poses: int) -> bool:
     return 0 < len(outliers) <= max(1, FEW * n_poses)
 
 
-def stand_out(outliers, loss: str = "linear") -> str:
-    """Which poses stand out (file rows: the header is row 1) and what to do about them.
+def stand_out(outliers, loss: str = "linear", measured: str = "points") -> str:
+    """Which poses stand out (file rows: the header is row 1; a camera's views by their
+    0-based index) and what to do about them.
 
     A failed fit leads with this (`casecal.identification.fit.verdict`): a gross value in
     one row is the likelier cause than anything the audit then finds.
     """
-    rows = ", ".join(str(i + 2) for i in outliers[:12]) + (" …" if len(outliers) > 12 else "")
     one = len(outliers) == 1
+    more = " …" if len(outliers) > 12 else ""
+    if measured == "pixels":  # arrays, not a file; no robust loss for cameras yet
+        views = ", ".join(str(i) for i in outliers[:12]) + more
+        which = "view stands out (view" if one else "views stand out (views"
+        it = "it" if one else "them"
+        return f"{len(outliers)} {which} {views}, 0-based): check {it}, or leave {it} out"
+    rows = ", ".join(str(i + 2) for i in outliers[:12]) + more
     what = (
         f"{len(outliers)} {'pose stands' if one else 'poses stand'} out "
         f"(file {'row' if one else 'rows'} {rows}): check {'it' if one else 'them'}"
@@ -158,7 +165,7 @@ def _notes(cal: Calibration) -> list[str]:
             if cal.audit is not None and cal.audit.failures
             else cal.message
         )
-        cause = f"{stand_out(cal.outliers, cal.loss)}; " if cal.outliers_lead else ""
+        cause = f"{stand_out(cal.outliers, cal.loss, cal.measured)}; " if cal.outliers_lead else ""
         notes.append(f"The fit FAILED: {cause}{reasons}. Do not use these values.")
     if cal.start_note:
         notes.append(cal.start_note)
@@ -187,13 +194,13 @@ def _notes(cal: Calibration) -> list[str]:
     if cal.loss != "linear":
         notes.append(f"Robust fit: {cal.loss} loss, by iteratively reweighted least squares.")
     if cal.outliers and not cal.outliers_lead:  # else the failure's note names them
-        notes.append(f"{stand_out(cal.outliers, cal.loss)}.")
+        notes.append(f"{stand_out(cal.outliers, cal.loss, cal.measured)}.")
     poor = cal.poorly_determined
     if poor:
         shown = ", ".join(f"{n} ± {_se_text(n, cal.standard_errors[n])}" for n in poor[:6]) + (
             " …" if len(poor) > 6 else ""
         )
-        bound = poorly_text(cal.nominal.sizes)
+        bound = _poorly_bounds(cal, poor)
         notes.append(
             f"{len(poor)} estimates are poorly determined (standard error above {bound}): "
             f"{shown}. The poses barely constrain them and noise is amplified along them; "
@@ -261,11 +268,24 @@ def _names(names) -> str:
     return ", ".join(names)
 
 
+def _poorly_bounds(cal: Calibration, names) -> str:
+    """The poorly determined bounds of the units of `names` in words ("1 mm or 0.1°"; a
+    lens's "5 px or 0.05" too)."""
+    facts = {}
+    for n in names:
+        f = cal.nominal.unit_facts(n)
+        facts.setdefault(f.shown, f)
+    if set(facts) <= {"mm", "deg"}:
+        return poorly_text(cal.nominal.sizes)
+    shown = [f"{f.poorly * f.factor:g} {f.shown}".rstrip() for f in facts.values()]
+    return " or ".join(shown)
+
+
 def _se_text(name: str, se: float) -> str:
     from .calibration import display_unit
 
     u, f = display_unit(name)
-    return f"{se * f:.3g} {u}"
+    return f"{se * f:.3g} {u}".rstrip()
 
 
 def _residual_scale(cal: Calibration) -> float:

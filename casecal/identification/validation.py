@@ -124,6 +124,12 @@ def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> V
     measurements : Measurements
         Poses not used in the calibration.
     """
+    if not isinstance(measurements, Measurements):
+        raise CalibrationError(
+            f"validate takes a tracker's Measurements, not {type(measurements).__name__}; for "
+            "a camera, predict held-out views with casecal.observations.simulate."
+            "simulate_pixels(cal.robot, q, cal.camera.setup) and compare their pixels"
+        )
     if measurements.contact:
         raise CalibrationError(
             "validating on contact sessions (fixed points, planes) is not supported yet: "

@@ -10,6 +10,7 @@ starting from the nominal `setup` (`casecal.identification.camera_fit`).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,8 +75,10 @@ class PixelMeasurements:
                 f"PixelMeasurements: view {first} has no corner found; leave such views out"
             )
         sigma = self.sigma_px
-        if isinstance(sigma, bool) or not (
-            isinstance(sigma, int | float | np.floating) and math.isfinite(sigma) and sigma > 0
+        if isinstance(sigma, np.ndarray) and sigma.ndim == 0:
+            sigma = sigma.item()
+        if isinstance(sigma, bool | np.bool_) or not (
+            isinstance(sigma, numbers.Real) and math.isfinite(sigma) and sigma > 0
         ):
             raise CalibrationError(
                 f"PixelMeasurements: sigma_px = {sigma!r}; give the pixel noise, a number > 0 "
@@ -84,6 +87,11 @@ class PixelMeasurements:
         for name, a in (("q", q), ("pixels", uv)):
             a.setflags(write=False)
             object.__setattr__(self, name, a)
+        if not isinstance(self.fit_intrinsics, bool | np.bool_):
+            raise CalibrationError(
+                f"PixelMeasurements: fit_intrinsics = {self.fit_intrinsics!r}; give True (the "
+                "intrinsics are estimated) or False (they are known)"
+            )
         object.__setattr__(self, "sigma_px", float(sigma))
         object.__setattr__(self, "fit_intrinsics", bool(self.fit_intrinsics))
 

@@ -7,10 +7,11 @@ A `CameraSetup` says where the camera and the board are:
 - ``"eye_to_hand"``: the camera fixed, its pose ``camera`` = T_base←cam; the board on the
   flange, its pose ``target`` = T_tool←target.
 
-"Base" is the frame of `casecal.Robot.fk` (its tool poses). The camera frame is OpenCV's
-(z along the optical axis, x right, y down in the image); the board frame is
-`casecal.observations.target`'s. All pure functions; randomness only through an explicit
-seed.
+"Base" is the frame `casecal.Robot.fk` gives the tool's poses in: the world outside the
+robot's own base frame (the same as the robot's base only where `Robot.base` is identity).
+The camera frame is OpenCV's (z along the optical axis, x right, y down in the image);
+the board frame is `casecal.observations.target`'s. All pure functions; randomness only
+through an explicit seed.
 """
 
 from __future__ import annotations

@@ -33,6 +33,9 @@ import numpy as np
 
 from ..errors import CalibrationError
 
+MAX_SPACING = 0.5
+"""Side of a square (m) past which a board's spacing is taken for a unit slip."""
+
 
 @dataclass(frozen=True)
 class Checkerboard:
@@ -67,6 +70,11 @@ class Checkerboard:
         if not (math.isfinite(spacing) and spacing > 0):
             raise CalibrationError(
                 f"Checkerboard: spacing = {self.spacing!r}; give the side of a square in m, > 0"
+            )
+        if spacing > MAX_SPACING:
+            raise CalibrationError(
+                f"Checkerboard: spacing = {spacing:g} m, a square larger than {MAX_SPACING:g} m; "
+                f"the side of a square in m (mm for m? {spacing:g} mm is {spacing * 1e-3:g} m)"
             )
         object.__setattr__(self, "spacing", spacing)
 
