@@ -70,3 +70,17 @@ def test_random_arms_measured_by_distances():
 @pytest.mark.slow
 def test_more_random_arms_measured_by_distances():
     check(range(40), at_floor=0.85)
+
+
+def test_identify_takes_distances_on_the_same_path():
+    """`cc.identify` of distance measurements is `identify_distances`, and refuses the
+    options distances do not take."""
+    arm = cc.load_robot("kr15_2")
+    q = cc.poses.uniform(arm, 30, seed=0)
+    true = arm.with_deviations({"a2": 1e-3, "d4": -5e-4, "theta3": 2e-4})
+    meas = simulate_distances(true, q, random_pairs(30, 200, seed=1), noise=SIGMA, seed=2)
+    one, two = cc.identify(arm, meas), identify_distances(arm, meas)
+    assert one.measured == "distances" and one.estimated == two.estimated
+    assert one.deviations == two.deviations
+    with pytest.raises(cc.CalibrationError, match="distance measurements do not take noise"):
+        cc.identify(arm, meas, noise=1e-5)

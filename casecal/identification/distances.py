@@ -27,13 +27,12 @@ from .audit import Audit, Facts, audit, smoothness
 from .calibration import Calibration
 from .distance_problem import DistanceProblem
 from .evidence import outside_gain, still_joints
-from .fit import METHODS
 from .fitting import check_iterations, rms_of, shared_problems, verdict
 from .linalg import gauss_newton_step
 from .mirror import second_answers
 from .rank import held_gain
 from .rounds import Settings, fit_in_rounds, workspace_poses
-from .solvers import ROUNDING, floor_cost
+from .solvers import ROUNDING, SOLVERS, floor_cost
 from .uncertainty import uncertainty
 
 
@@ -179,7 +178,7 @@ def identify_distances(
         from ..model.kinematics import tree_refusal
 
         raise tree_refusal("distance measurements")
-    if method not in METHODS or method == "ipopt":
+    if method not in SOLVERS or method == "ipopt":
         raise CalibrationError("distance identification supports svd, gauss-newton and lm")
     names = selection(robot, parameters)
     if measurements.q.shape[1] != robot.dof:

@@ -41,6 +41,7 @@ from .calibration import Calibration
 from .camera_fit import identify_camera
 from .contact import check_robot as check_contact_robot
 from .contact import contact_checks, plausible_error
+from .distances import DistanceMeasurements, identify_distances
 from .facts import gather
 from .fitting import check_iterations, rms_of, shared_problems, verdict
 from .problem import Problem
@@ -88,8 +89,12 @@ def identify(
     ----------
     robot : Robot
         The nominal robot.
-    measurements : Measurements
-        Joint values and measured tool-point positions (m), with noise σ.
+    measurements : Measurements, DistanceMeasurements or PixelMeasurements
+        Joint values and measured tool-point positions (m), with noise σ; or distances
+        between pairs of poses (`casecal.identification.distances.identify_distances`);
+        or a camera's pixels of a checkerboard
+        (`casecal.identification.camera_fit.identify_camera`). All run the same rounds,
+        rank, audit and covariance; the options a kind does not take are refused.
     parameters : str, list of str or None
         What to identify: names, families or ``"all"``. Default: the paper's set θ, a, d
         of every joint (α fixed).
@@ -165,21 +170,15 @@ def identify(
             f"identify takes a Robot, got {type(robot).__name__}; load one first, e.g. "
             "cc.load_robot('puma560') or cc.load_robot('robot.urdf')"
         )
+    given = {"noise": noise, "bounds": bounds or None, "prior": prior or None}
+    given |= {"orientation_sigma": orientation_sigma, "per_session": per_session}
+    if isinstance(measurements, DistanceMeasurements):
+        _refuse(given, loss, "distance", "their own (DistanceMeasurements.sigma)")
+        return identify_distances(
+            robot, measurements, parameters, method, max_iterations, tolerance, truth
+        )
     if isinstance(measurements, PixelMeasurements):
-        given = {
-            "noise": noise,
-            "bounds": bounds or None,
-            "prior": prior or None,
-            "orientation_sigma": orientation_sigma,
-            "per_session": per_session,
-        }
-        unsupported = [k for k, v in given.items() if v is not None]
-        unsupported += ["loss"] if loss != "linear" else []
-        if unsupported:
-            raise CalibrationError(
-                f"camera measurements do not take {', '.join(unsupported)} yet; the pixel σ "
-                "is the measurements' sigma_px"
-            )
+        _refuse(given, loss, "camera", "the measurements' sigma_px")
         if robot.coupling is not None:
             raise CalibrationError(
                 "camera calibration of a robot with coupled joints is not supported yet; "
@@ -393,6 +392,16 @@ def identify(
         unmeasured=None if np.all(measured) else np.repeat(~measured, y.shape[1], axis=0),
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+def _refuse(given: dict, loss: str, kind: str, sigma: str) -> None:
+    """Refuse the options `given` (not None) that `kind` measurements do not take."""
+    unsupported = [k for k, v in given.items() if v is not None]
+    unsupported += ["loss"] if loss != "linear" else []
+    if unsupported:
+        raise CalibrationError(
+            f"{kind} measurements do not take {', '.join(unsupported)} yet; their σ is {sigma}"
+        )
 
 
 def _selection(robot: Robot, parameters, sessions) -> list[str]:
