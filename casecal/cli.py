@@ -116,6 +116,11 @@ def _with_sizes(robot, args: argparse.Namespace):
 
 def _cmd_identify(args: argparse.Namespace) -> None:
     robot = _with_sizes(robot_for(args, args.robot), args)
+    if args.camera:
+        return _identify_camera(args, robot)
+    for flag, value in (("--sigma-px", args.sigma_px), ("--camera-out", args.camera_out)):
+        if value is not None:
+            raise CalibrationError(f"{flag} needs --camera (a camera measurement file)")
     if args.pairs:
         unsupported = [
             flag
@@ -260,6 +265,57 @@ def _identify_distances(args: argparse.Namespace, robot) -> None:
     _write_calibrated(args, cal.robot)
 
 
+def _identify_camera(args: argparse.Namespace, robot) -> None:
+    """identify --camera: the measurement file is a camera's (`casecal.observations.files`)."""
+    from .observations.files import camera_text, read_camera, read_pixels
+
+    unsupported = [
+        flag
+        for flag, value in (
+            ("--pairs", args.pairs),
+            ("--holdout", args.holdout),
+            ("--loss", args.loss != "linear"),
+            ("--orientation-sigma", args.orientation_sigma),
+            ("--truth", args.truth),
+            ("--noise (the pixel noise is --sigma-px)", args.noise),
+            ("--per-session", args.per_session),
+        )
+        if value
+    ]
+    if unsupported:
+        raise CalibrationError(f"{', '.join(unsupported)} cannot be used with --camera")
+    for out in (args.output, args.deviations_out, args.camera_out):
+        if out is not None and not out.strip():
+            raise CalibrationError("an output file name is empty; give a file name")
+        if out:
+            _check_writable_dir(os.path.dirname(os.path.abspath(out)))
+    _check_robot_format(args, robot)
+    sigma = None if args.sigma_px is None else float(args.sigma_px)
+    meas = read_pixels(args.measurements, robot, read_camera(args.camera), sigma)
+    found = int(meas.found.sum())
+    print(f"{meas.n_poses} views, {found} corners found of {meas.pixels.shape[1]} per view")
+    cal = identify(robot, meas, args.parameters, args.method, max_iterations=args.max_iterations)
+    print(cal.summary())
+    print(
+        f"RMS pixel error: {cal.camera.rms_px_before:.3g} px with the camera and board "
+        f"poses alone fitted, {cal.camera.rms_px:.3g} px calibrated (sigma {meas.sigma_px:g} px)"
+    )
+    if args.strict and cal.unidentifiable:
+        raise CalibrationError(
+            f"--strict: the data cannot identify {', '.join(cal.unidentifiable)}; ask for "
+            "fewer parameters or measure more varied views (nothing written)"
+        )
+    if not cal.success:
+        raise CalibrationError(f"the fit did not pass ({cal.message}); nothing written")
+    files = []
+    if args.camera_out:
+        comment = f"casecal: the camera fitted with {args.robot} from {args.measurements}"
+        files.append((args.camera_out, camera_text(cal.camera.setup, comment)))
+    _write_outputs(args, cal, files)
+    if args.camera_out:
+        print(f"fitted camera, board and lens written to {args.camera_out}")
+
+
 def _how_to_load(path, robot) -> str:
     if robot.is_tree and str(path).lower().endswith(".urdf"):  # the file has every link
         return f"load it with casecal.load_robot or --tip-link {','.join(robot.tips)}"
@@ -300,10 +356,11 @@ def _robot_text(args: argparse.Namespace, robot) -> str:
     return out.text
 
 
-def _write_outputs(args: argparse.Namespace, cal) -> None:
-    """-o and --deviations-out together: both written to temporary files first, then
-    renamed, the robot file last (it is the calibration; the deviations describe it)."""
-    files = []
+def _write_outputs(args: argparse.Namespace, cal, files=()) -> None:
+    """-o and --deviations-out (and `files`, (path, text) pairs) together: all written to
+    temporary files first, then renamed, the robot file last (it is the calibration; the
+    others describe it)."""
+    files = list(files)
     if args.deviations_out:
         files.append((args.deviations_out, _deviations_text(cal, args.deviations_out)))
     if args.output:
@@ -798,6 +855,26 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="CSV",
         help="relative measurements: CSV of i, j, distance_mm (0-based rows of the measurement "
         "file, whose positions are then not needed)",
+    )
+    p.add_argument(
+        "--camera",
+        metavar="TOML",
+        help="camera calibration: the measurement file has c{k}_u_px, c{k}_v_px columns of a "
+        "checkerboard's corners per view, and this file the nominal camera, board and lens "
+        "(a [camera] table: mode, camera_xyz_mm, camera_rpy_deg, target_xyz_mm, "
+        "target_rpy_deg, fx, fy, cx, cy, distortion, image_size, board_rows, board_cols, "
+        "board_spacing_mm)",
+    )
+    p.add_argument(
+        "--sigma-px",
+        metavar="PX",
+        type=float,
+        help="with --camera: the pixel noise sigma, px (when the file has no sigma_px column)",
+    )
+    p.add_argument(
+        "--camera-out",
+        metavar="TOML",
+        help="with --camera: write the fitted camera, board pose and lens here",
     )
     p.add_argument(
         "--per-session",

@@ -1,0 +1,249 @@
+"""Camera measurement files: one row per view, its joint values and its corners' pixels.
+
+Columns:
+
+- the joint columns of `casecal.read_csv` (``q1_deg`` …, ``q1_rad``, ``q1_mm``, or a
+  URDF robot's joint names with a unit);
+- ``c{k}_u_px`` and ``c{k}_v_px`` for every corner k = 0 … rows·cols − 1 of the board, in
+  `casecal.observations.target.Checkerboard.corners` order (OpenCV's
+  ``findChessboardCorners(image, (cols, rows))`` order; u along the image's rows, v down,
+  origin at the centre of the top-left pixel, as OpenCV's); both cells empty where the
+  detector did not find the corner;
+- optionally ``sigma_px``, one value for every row: the pixel noise σ.
+
+`read_pixels` needs the robot (for the joints) and the nominal camera (`CameraSetup`: for
+the board's size and to start the fit from); `write_pixels` writes what it reads.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+
+from ..data.files import _numbers, read_joints
+from ..data.table import read_table
+from ..errors import CalibrationError
+from ..model.robot import Robot
+from ..textio import write_atomic
+from .pixels import PixelMeasurements
+from .simulate import CameraSetup
+
+_CORNER = re.compile(r"^c(\d+)_([uv])_px$")
+
+
+def read_pixels(
+    path, robot: Robot, setup: CameraSetup, sigma_px=None, fit_intrinsics: bool = True
+) -> PixelMeasurements:
+    """Read a camera measurement file (module doc).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The CSV file (``"-"``: standard input).
+    robot : Robot
+        The robot the joint values are of.
+    setup : CameraSetup
+        The nominal camera and board: the board says how many corners each row has.
+    sigma_px : float, optional
+        The pixel noise σ (px), when the file has no ``sigma_px`` column; given with one,
+        they must agree.
+    fit_intrinsics : bool
+        As `PixelMeasurements`'.
+
+    Raises
+    ------
+    CalibrationError
+        For a missing or extra corner column (a board of other rows and columns), one cell
+        of a corner's pair empty, no σ, or anything `casecal.read_csv` refuses in the joints.
+    """
+    df, label = read_table(path, "camera measurement file")
+    q = read_joints(df, robot, label)
+    n = setup.board.n_corners
+    found = {}
+    for column in df.columns:
+        match = _CORNER.match(str(column))
+        if match:
+            found.setdefault(int(match.group(1)), set()).add(match.group(2))
+    if not found:
+        raise CalibrationError(
+            f"{label}: no corner columns; give c0_u_px, c0_v_px … c{n - 1}_v_px (the "
+            f"{setup.board.rows} × {setup.board.cols} board's corners, in pixels)"
+        )
+    beyond = sorted(k for k in found if k >= n)
+    missing = [k for k in range(n) if found.get(k) != {"u", "v"}]
+    if beyond or missing:
+        what = f"columns up to c{max(found)}_…" if beyond else f"no c{missing[0]}_u_px/v_px pair"
+        raise CalibrationError(
+            f"{label}: {what}, but the board of the setup has {setup.board.rows} × "
+            f"{setup.board.cols} = {n} inner corners (c0 … c{n - 1}); give the board the "
+            "file's rows and columns (inner corners, as OpenCV's patternSize = (cols, rows))"
+        )
+    uv = np.empty((len(df), n, 2))
+    for k in range(n):
+        for j, axis in enumerate("uv"):
+            uv[:, k, j] = _cells(df, f"c{k}_{axis}_px", label)
+    sigma = _sigma(df, label, sigma_px)
+    return PixelMeasurements(q, uv, setup, sigma, fit_intrinsics)
+
+
+def write_pixels(path, measurements: PixelMeasurements, robot: Robot) -> None:
+    """Write `measurements` as a camera measurement file (module doc), atomically: joint
+    values in degrees (revolute) and millimetres (prismatic), pixels to 17 digits, empty
+    cells for corners not found, and ``sigma_px``."""
+    data = {}
+    for i, joint in enumerate(robot.controller_joints, start=1):
+        column = measurements.q[:, i - 1]
+        if joint.type == "R":
+            data[f"q{i}_deg"] = np.rad2deg(column)
+        else:
+            data[f"q{i}_mm"] = column * 1e3
+    for k in range(measurements.pixels.shape[1]):
+        for j, axis in enumerate("uv"):
+            data[f"c{k}_{axis}_px"] = measurements.pixels[:, k, j]
+    data["sigma_px"] = np.full(measurements.n_poses, measurements.sigma_px)
+    text = pd.DataFrame(data).to_csv(index=False, float_format="%.17g", lineterminator="\n")
+    write_atomic(path, text)
+
+
+def _cells(df: pd.DataFrame, column: str, label: str) -> np.ndarray:
+    """A pixel column: numbers, NaN for an empty cell; anything else refused by its row."""
+    col = df[column]
+    empty = col.isna().to_numpy() | (col.astype(str).str.strip() == "").to_numpy()
+    text = col.astype(str).str.strip()
+    values = pd.to_numeric(text.where(~empty, "nan"), errors="coerce").to_numpy(float, copy=True)
+    bad = ~empty & ~np.isfinite(values)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise CalibrationError(
+            f"{label}: row {row + 2}, column {column!r}: {str(col.iloc[row])!r} is not a "
+            "finite number of pixels; leave both cells of a corner empty where it was not found"
+        )
+    values[empty] = np.nan
+    return values
+
+
+def _sigma(df: pd.DataFrame, label: str, sigma_px) -> float:
+    """The pixel σ from the ``sigma_px`` column or the argument, refusing a disagreement."""
+    if "sigma_px" not in df:
+        if sigma_px is None:
+            raise CalibrationError(
+                f"{label}: no sigma_px column and no sigma_px given; give the pixel noise "
+                "(a detector's sub-pixel corners: 0.1–0.5 px)"
+            )
+        return sigma_px
+    values = _numbers(df, "sigma_px", label)
+    if np.any(values != values[0]):
+        raise CalibrationError(
+            f"{label}: sigma_px differs between rows ({values.min():g} … {values.max():g} px); "
+            "one pixel noise for every view is supported"
+        )
+    if sigma_px is not None and float(sigma_px) != values[0]:
+        raise CalibrationError(
+            f"{label}: sigma_px {values[0]:g} px in the file but {sigma_px!r} given; give one"
+        )
+    return float(values[0])
+
+
+CAMERA_KEYS = {
+    "mode": "eye_to_hand or eye_in_hand",
+    "camera_xyz_mm": "the camera's position: in the world (eye_to_hand) or the tool frame",
+    "camera_rpy_deg": "its rotation, roll pitch yaw (Rz·Ry·Rx), degrees",
+    "target_xyz_mm": "the board's position: in the tool frame (eye_to_hand) or the world",
+    "target_rpy_deg": "its rotation, roll pitch yaw, degrees",
+    "fx": "focal length along u, px",
+    "fy": "focal length along v, px",
+    "cx": "principal point u, px",
+    "cy": "principal point v, px",
+    "distortion": "k1 k2 p1 p2 k3 (OpenCV's order; optional, default none)",
+    "image_size": "width, height in px",
+    "board_rows": "inner corners per column",
+    "board_cols": "inner corners per row",
+    "board_spacing_mm": "side of a square, mm",
+}
+"""The keys of a camera file's ``[camera]`` table and what each holds."""
+
+
+def read_camera(path) -> CameraSetup:
+    """A nominal (or fitted) camera from a TOML file's ``[camera]`` table (`CAMERA_KEYS`).
+
+    "World" is the frame the robot's tool poses are given in (`casecal.Robot.fk`).
+    """
+    import tomllib
+
+    from ..model.frames import matrix_from_rpy
+    from ..textio import read_text
+    from .camera import Intrinsics
+    from .target import Checkerboard
+
+    label = str(path)
+    try:
+        table = tomllib.loads(read_text(path, "camera file"))["camera"]
+    except tomllib.TOMLDecodeError as exc:
+        raise CalibrationError(f"{label}: not TOML ({exc})") from None
+    except KeyError:
+        raise CalibrationError(f"{label}: no [camera] table; {_keys_text()}") from None
+    optional = {"distortion"}
+    missing = [k for k in CAMERA_KEYS if k not in table and k not in optional]
+    unknown = [k for k in table if k not in CAMERA_KEYS]
+    if missing or unknown:
+        what = f"missing {', '.join(missing)}" if missing else f"unknown {', '.join(unknown)}"
+        raise CalibrationError(f"{label}: [camera] {what}; {_keys_text()}")
+
+    def numbers(key, n):
+        value = table[key]
+        if (
+            not isinstance(value, list)
+            or len(value) != n
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+        ):
+            raise CalibrationError(f"{label}: [camera] {key} must be {n} numbers")
+        return np.array(value, dtype=float)
+
+    def pose(prefix):
+        T = np.eye(4)
+        T[:3, :3] = matrix_from_rpy(np.radians(numbers(f"{prefix}_rpy_deg", 3)))
+        T[:3, 3] = numbers(f"{prefix}_xyz_mm", 3) * 1e-3
+        return T
+
+    distortion = numbers("distortion", 5) if "distortion" in table else np.zeros(5)
+    lens = Intrinsics(table["fx"], table["fy"], table["cx"], table["cy"], *distortion)
+    spacing = table["board_spacing_mm"]
+    if isinstance(spacing, bool) or not isinstance(spacing, int | float):
+        raise CalibrationError(f"{label}: [camera] board_spacing_mm must be a number (mm)")
+    board = Checkerboard(table["board_rows"], table["board_cols"], spacing * 1e-3)
+    size = tuple(int(v) for v in numbers("image_size", 2))
+    return CameraSetup(table["mode"], pose("camera"), pose("target"), lens, board, size)
+
+
+def camera_text(setup: CameraSetup, comment: str = "") -> str:
+    """The TOML text of `setup` that `read_camera` reads back (poses to 1e-12 mm, deg)."""
+    from ..model.frames import rpy_from_matrix
+
+    def vector(values) -> str:
+        return "[" + ", ".join(f"{float(v):.17g}" for v in values) + "]"
+
+    lens = setup.intrinsics
+    lines = [f"# {line}" for line in comment.splitlines()] + [
+        "[camera]",
+        f'mode = "{setup.mode}"',
+        f"camera_xyz_mm = {vector(setup.camera[:3, 3] * 1e3)}",
+        f"camera_rpy_deg = {vector(np.degrees(rpy_from_matrix(setup.camera[:3, :3])))}",
+        f"target_xyz_mm = {vector(setup.target[:3, 3] * 1e3)}",
+        f"target_rpy_deg = {vector(np.degrees(rpy_from_matrix(setup.target[:3, :3])))}",
+        f"fx = {lens.fx:.17g}",
+        f"fy = {lens.fy:.17g}",
+        f"cx = {lens.cx:.17g}",
+        f"cy = {lens.cy:.17g}",
+        f"distortion = {vector([lens.k1, lens.k2, lens.p1, lens.p2, lens.k3])}",
+        f"image_size = [{setup.image_size[0]}, {setup.image_size[1]}]",
+        f"board_rows = {setup.board.rows}",
+        f"board_cols = {setup.board.cols}",
+        f"board_spacing_mm = {setup.board.spacing * 1e3:.17g}",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _keys_text() -> str:
+    return "give " + "; ".join(f"{k} ({v})" for k, v in CAMERA_KEYS.items())
