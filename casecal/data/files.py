@@ -429,19 +429,25 @@ def _check_joint_unit(values: np.ndarray, joint, name: str, label: str) -> None:
             )
 
 
+def joint_columns(q: np.ndarray, robot: Robot) -> dict:
+    """The joint columns a measurement file is written with: ``q{i}_deg`` for a revolute
+    joint, ``q{i}_mm`` for a prismatic one, from `q` (N, ≥ dof) in rad and m."""
+    data = {}
+    for i, joint in enumerate(robot.controller_joints, start=1):
+        if joint.type == "R":
+            data[f"q{i}_deg"] = np.rad2deg(q[:, i - 1])
+        else:
+            data[f"q{i}_mm"] = q[:, i - 1] * 1e3
+    return data
+
+
 def write_csv(path, measurements: Measurements, robot: Robot) -> None:
     """Write `measurements` as CSV in degrees and millimetres, atomically.
 
     Numbers are written with 17 significant digits, so reading back loses nothing but the
     rounding of the mm/deg conversion (~1e-16 relative).
     """
-    data = {}
-    for i, joint in enumerate(robot.controller_joints, start=1):
-        col = measurements.q[:, i - 1]
-        if joint.type == "R":
-            data[f"q{i}_deg"] = np.rad2deg(col)
-        else:
-            data[f"q{i}_mm"] = col * 1e3
+    data = joint_columns(measurements.q, robot)
     if measurements.q.shape[1] > robot.dof:
         for k, (name, _) in enumerate(robot.inputs):
             data[name] = measurements.q[:, robot.dof + k]

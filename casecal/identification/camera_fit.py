@@ -30,7 +30,7 @@ from .audit import audit
 from .calibration import Calibration
 from .contact import plausible_error
 from .facts import gather
-from .fitting import check_iterations, rms_of, shared_problems, verdict
+from .fitting import check_iterations, outcome_fields, rms_of, shared_problems, verdict
 from .pixel_problem import PixelProblem, View
 from .reference import FRAME_PREFIXES, frame_parameters, frames_fitted
 from .rounds import Settings, fit_in_rounds
@@ -261,28 +261,23 @@ def identify_camera(
         message = f"{gross_causes(camera.rms_px_before)}; {message}"
     final = got.at_end if out.end_analysis is not out.start_analysis else make(rig, names=names)
     cal = Calibration(
+        **outcome_fields(out, got),
         method=method,
         nominal=rig,
         robot=robot_of(out.robot, robot),
         parameters=tuple(names),
-        estimated=out.estimated,
         deviations=out.robot.deviations_from(rig, names),
         standard_errors=se,
         covariance=cov,
         residuals=got.estimated.point_residuals(x0).reshape(-1, 3),
         residuals_before=before.point_residuals(np.zeros(len(names))).reshape(-1, 3),
-        iterations=out.iterations,
         status=status,
         message=message,
-        history=out.history,
-        observability=out.end_analysis,
         sigma_known=True,
         wall_time=time.perf_counter() - t0,
         start_note=camera_note(measurements.setup.mode),
-        outliers=got.outliers,
         outliers_lead=lead,
         audit=checks,
-        solver_status=out.solver_status,
         representation=represent(
             final.reduced(np.zeros(len(names))).R,
             names,
@@ -291,13 +286,6 @@ def identify_camera(
             standard_errors=se,
             sizes=rig.sizes,
         ),
-        pruned=out.pruned,
-        frozen=out.frozen,
-        start_observability=out.start_analysis,
-        rounds=out.rounds,
-        joined=out.joined,
-        pose_blind=got.facts.blind_here,
-        still_joints=got.facts.still,
         measured="pixels",
         unmeasured=got.estimated._unmeasured.reshape(-1, 3),
         camera=camera,

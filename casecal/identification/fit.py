@@ -43,7 +43,7 @@ from .contact import check_robot as check_contact_robot
 from .contact import contact_checks, plausible_error
 from .distances import DistanceMeasurements, identify_distances
 from .facts import gather
-from .fitting import check_iterations, rms_of, shared_problems, verdict
+from .fitting import check_iterations, outcome_fields, rms_of, shared_problems, verdict
 from .problem import Problem
 from .reference import FALLBACK_NOTE, frame_parameters, frames_fitted
 from .rounds import LOSSES, Settings, fit_in_rounds
@@ -342,11 +342,11 @@ def identify(
     se = dict.fromkeys(names, float("nan"))
     se.update(zip(out.estimated, np.sqrt(np.diag(cov)).tolist(), strict=True))
     cal = Calibration(
+        **outcome_fields(out, got),
         method=method,
         nominal=robot,
         robot=session_robot(calibrated, None),  # the first session's frames
         parameters=tuple(names),
-        estimated=out.estimated,
         deviations=calibrated.deviations_from(robot, names),  # rotations: not differences
         standard_errors=se,
         covariance=cov,
@@ -355,21 +355,16 @@ def identify(
             make(reference, names=names).point_residuals(np.zeros(len(names)))
         ).reshape(-1, 3),
         orientation_residuals=frame.vectors_out(est.orientation_residuals(x0)),
-        outliers=got.outliers,
         outliers_lead=lead,
         loss=loss
         if loss == "linear"
         else f"{loss} (scale {loss_scale:g}{' sigma' if known else ' robust sd'})",
-        iterations=out.iterations,
         status=status,
         message=message,
-        history=out.history,
-        observability=out.end_analysis,
         sigma_known=known,
         wall_time=time.perf_counter() - t_start,
         start_note=" ".join(t for t in (point_note, start_note, _repeats(q, y)) if t),
         audit=checks,
-        solver_status=out.solver_status,
         representation=_representation(
             calibrated,
             got.at_end,
@@ -379,13 +374,6 @@ def identify(
             out,
             se,
         ),
-        pruned=out.pruned,
-        frozen=out.frozen,
-        start_observability=out.start_analysis,
-        rounds=out.rounds,
-        joined=out.joined,
-        pose_blind=got.facts.blind_here,
-        still_joints=got.facts.still,
         sessions={}
         if sessions is None
         else fitted_sessions(calibrated, se, point_residuals, sessions, held),

@@ -70,3 +70,24 @@ def check_iterations(max_iterations, tolerance) -> tuple[int, float]:
 def rms_of(problem: Problem, k: int) -> float:
     """`point_rms` of `problem` at its start, measured coordinates only."""
     return point_rms(problem.point_residuals(np.zeros(k)), problem._unmeasured)
+
+
+def outcome_fields(out, got) -> dict:
+    """The `Calibration` fields every fit takes from where its rounds ended (`out`,
+    `casecal.identification.rounds.Outcome`) and what was gathered there (`got`,
+    `casecal.identification.facts.Gathered`)."""
+    return {
+        "estimated": out.estimated,
+        "iterations": out.iterations,
+        "history": out.history,
+        "observability": out.end_analysis,
+        "solver_status": out.solver_status,
+        "pruned": out.pruned,
+        "frozen": out.frozen,
+        "start_observability": out.start_analysis,
+        "rounds": out.rounds,
+        "joined": out.joined,
+        "pose_blind": got.facts.blind_here,
+        "still_joints": got.facts.still,
+        "outliers": got.outliers,
+    }

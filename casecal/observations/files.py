@@ -22,7 +22,7 @@ import re
 import numpy as np
 import pandas as pd
 
-from ..data.files import _numbers, read_joints
+from ..data.files import _numbers, joint_columns, read_joints
 from ..data.table import read_table
 from ..errors import CalibrationError
 from ..model.robot import Robot
@@ -92,13 +92,7 @@ def write_pixels(path, measurements: PixelMeasurements, robot: Robot) -> None:
     """Write `measurements` as a camera measurement file (module doc), atomically: joint
     values in degrees (revolute) and millimetres (prismatic), pixels to 17 digits, empty
     cells for corners not found, and ``sigma_px``."""
-    data = {}
-    for i, joint in enumerate(robot.controller_joints, start=1):
-        column = measurements.q[:, i - 1]
-        if joint.type == "R":
-            data[f"q{i}_deg"] = np.rad2deg(column)
-        else:
-            data[f"q{i}_mm"] = column * 1e3
+    data = joint_columns(measurements.q, robot)
     for k in range(measurements.pixels.shape[1]):
         for j, axis in enumerate("uv"):
             data[f"c{k}_{axis}_px"] = measurements.pixels[:, k, j]
