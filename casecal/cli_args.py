@@ -56,7 +56,7 @@ def scheduler(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-OUTPUTS = {"output": "-o", "deviations_out": "--deviations-out"}
+OUTPUTS = {"output": "-o", "deviations_out": "--deviations-out", "camera_out": "--camera-out"}
 """The options that name files a command writes (``report -o`` names a folder)."""
 
 
