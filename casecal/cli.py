@@ -273,7 +273,6 @@ def _identify_camera(args: argparse.Namespace, robot) -> None:
         flag
         for flag, value in (
             ("--pairs", args.pairs),
-            ("--holdout", args.holdout),
             ("--loss", args.loss != "linear"),
             ("--orientation-sigma", args.orientation_sigma),
             ("--truth", args.truth),
@@ -284,6 +283,10 @@ def _identify_camera(args: argparse.Namespace, robot) -> None:
     ]
     if unsupported:
         raise CalibrationError(f"{', '.join(unsupported)} cannot be used with --camera")
+    if args.camera_out and not args.camera_out.lower().endswith(".toml"):
+        raise CalibrationError(
+            f"--camera-out {args.camera_out}: a camera file is TOML; name it .toml"
+        )
     for out in (args.output, args.deviations_out, args.camera_out):
         if out is not None and not out.strip():
             raise CalibrationError("an output file name is empty; give a file name")
@@ -294,6 +297,9 @@ def _identify_camera(args: argparse.Namespace, robot) -> None:
     meas = read_pixels(args.measurements, robot, read_camera(args.camera), sigma)
     found = int(meas.found.sum())
     print(f"{meas.n_poses} views, {found} corners found of {meas.pixels.shape[1]} per view")
+    held = None
+    if args.holdout:
+        meas, held = split(meas, args.holdout, seed=args.seed)
     cal = identify(robot, meas, args.parameters, args.method, max_iterations=args.max_iterations)
     print(cal.summary())
     print(
@@ -314,6 +320,9 @@ def _identify_camera(args: argparse.Namespace, robot) -> None:
     _write_outputs(args, cal, files)
     if args.camera_out:
         print(f"fitted camera, board and lens written to {args.camera_out}")
+    if held is not None:
+        print(f"\nValidation on {held.n_poses} held-out views (--holdout {args.holdout}):")
+        print(validate(cal.robot, held, robot, camera=cal.camera.setup))
 
 
 def _how_to_load(path, robot) -> str:

@@ -76,7 +76,8 @@ def test_wrong_files_are_refused_with_what_to_fix(tmp_path, puma):
     camera.write_text(
         camera_text(truth).replace("board_spacing_mm = 20", "board_spacing_mm = 0.02")
     )
-    assert read_camera(camera).board.spacing == pytest.approx(2e-5)  # mm as written: small
+    with pytest.raises(CalibrationError, match=r"camera.toml: \[camera\] Checkerboard.*m for mm"):
+        read_camera(camera)  # the metres of a 20 mm square, written as mm
 
 
 def test_the_command_line_calibrates_from_camera_files(tmp_path, puma, capsys):
@@ -102,8 +103,14 @@ def test_the_command_line_calibrates_from_camera_files(tmp_path, puma, capsys):
     np.testing.assert_allclose(calibrated.vector(), cal.robot.vector(), atol=1e-12)
     np.testing.assert_allclose(fitted.camera, cal.camera.setup.camera, atol=1e-12)
     assert fitted.intrinsics.fx == pytest.approx(cal.camera.setup.intrinsics.fx, abs=1e-9)
+    # a fifth of the views held out: the calibrated model at the noise floor on them
+    assert main([*argv, "--holdout", "0.2"]) == 0
+    out = capsys.readouterr().out
+    assert "Validation on 12 held-out views (--holdout 0.2):" in out
+    after = next(line for line in out.splitlines() if line.startswith("after"))
+    assert float(after.split()[1]) < 1.15 * np.sqrt(2) * SIGMA  # px RMS
     # options a camera fit cannot honour, refused before any work
-    assert main([*argv, "--holdout", "0.2"]) == 2
-    assert "--holdout cannot be used with --camera" in capsys.readouterr().err
+    assert main([*argv, "--loss", "huber"]) == 2
+    assert "--loss cannot be used with --camera" in capsys.readouterr().err
     assert main(["identify", "puma560", str(views), "--sigma-px", "0.3"]) == 2
     assert "--sigma-px needs --camera" in capsys.readouterr().err

@@ -181,3 +181,19 @@ def test_a_board_turned_about_one_axis_fails_and_says_what_it_cannot_see(puma):
     assert not cal.success
     assert "in every pose" in cal.message  # the joints that never moved, by value
     assert {"camera_fx", "camera_fy", "a2", "d4"} <= set(cal.unidentifiable)
+
+
+def test_validation_on_the_next_days_views(fitted, puma):
+    """Held-out views taken after the camera was bumped 1 cm and 0.5°: the poses are
+    refitted, and the calibrated robot with the fitted lens reaches the noise floor
+    (√2 σ per corner) where the nominal one does not."""
+    cal, true_robot, true_setup, nominal, _ = fitted
+    bumped = moved_setup(true_setup, {"camera_x": 0.01, "camera_wy": 0.009})
+    q = select_views(true_robot, 30, bumped, seed=21, q_centre=PUMA_Q0, spread=0.3, max_tilt=0.9)
+    views = simulate_camera(true_robot, q, bumped, SIGMA, seed=22)
+    views = dataclasses.replace(views, setup=nominal)
+    check = cc.validate(cal.robot, views, puma, camera=cal.camera.setup)
+    floor = np.sqrt(2) * SIGMA
+    assert check.after.rms < 1.1 * floor, str(check)
+    assert check.before.rms > 1.5 * floor, str(check)
+    assert "held-out views" in str(check) and check.n_views == 30

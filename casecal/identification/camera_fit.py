@@ -26,7 +26,7 @@ from ..observations.pixels import PixelMeasurements
 from ..observations.rig import INTRINSIC_PARAMETERS, fitted_setup, rig_robot, robot_of
 from ..observations.simulate import CameraSetup, points_in_camera
 from .analysis import represent, selection
-from .audit import audit
+from .audit import Audit, audit
 from .calibration import Calibration
 from .contact import plausible_error
 from .facts import gather
@@ -34,6 +34,7 @@ from .fitting import check_iterations, outcome_fields, rms_of, shared_problems, 
 from .pixel_problem import PixelProblem, View
 from .reference import FRAME_PREFIXES, frame_parameters, frames_fitted
 from .rounds import Settings, fit_in_rounds
+from .scale import board_size_check
 from .solvers import SOLVERS
 from .summary import outliers_lead, stand_out
 
@@ -240,7 +241,12 @@ def identify_camera(
     e_rounds = max(e_before, plausible_error(start, names))
     out = fit_in_rounds(make, start, names, settings, e_rounds)
     got = gather(make, rig, start, reference, names, out, settings, e0, e_before)
+    calibrated = robot_of(out.robot, robot)
+    size = board_size_check(robot, calibrated, measurements.q, measurements.setup.board.spacing)
     checks = audit(got.facts)
+    checks = (
+        Audit((size, *checks.checks)) if size.passed is False else Audit((*checks.checks, size))
+    )
     status, message = verdict(checks, out.solver_status, out.message)
     model_error = bool(checks.failures) and checks.failures[0].cause
     lead = status < 0 and outliers_lead(got.outliers, len(measurements.q)) and not model_error
@@ -264,7 +270,7 @@ def identify_camera(
         **outcome_fields(out, got),
         method=method,
         nominal=rig,
-        robot=robot_of(out.robot, robot),
+        robot=calibrated,
         parameters=tuple(names),
         deviations=out.robot.deviations_from(rig, names),
         standard_errors=se,

@@ -198,6 +198,11 @@ def identify_distances(
             still_joints=still_joints(measurements.q, robot),
         )
     known = bool(np.all(measurements.sigma > 0))
+    if not known and np.any(measurements.sigma > 0):
+        raise CalibrationError(
+            "distance sigma is zero for some pairs and not others; give every pair its "
+            "sigma (> 0), or none (0 everywhere) to weigh all alike"
+        )
     w = 1.0 / measurements.sigma if known else np.ones(measurements.n_pairs)
     max_iterations, tolerance = check_iterations(max_iterations, tolerance)
     make = shared_problems(_maker(measurements.q, measurements.pairs, measurements.distances, w))
@@ -321,8 +326,36 @@ def identify_distances(
         pruned=fit.pruned,
         frozen=fit.frozen,
         measured="distances",
+        start_note=_flat_note(robot, names),
     )
     return cal.compare_to(truth) if truth is not None else cal
+
+
+FLAT = 1e-6
+"""RMS distance (m) of a robot's tool points from their best plane, across its joint
+ranges, under which it moves in a plane."""
+
+
+def _flat_note(robot: Robot, names) -> str:
+    """Words for a planar arm whose tilts out of its plane were not asked for: distances see
+    them at second order only, so the fit takes the arm to be flat; else ""."""
+    unasked = [n for n in robot.parameter_names if n.startswith(("alpha", "beta"))]
+    unasked = [n for n in unasked if n not in names]
+    q_work = workspace_poses(robot)
+    if not unasked or q_work is None:
+        return ""
+    p = robot.position(q_work)
+    thickness = np.linalg.svd(p - p.mean(axis=0), compute_uv=False)[-1] / np.sqrt(len(p))
+    if thickness > FLAT:
+        return ""
+    return (
+        f"The arm moves in a plane, and its tilts out of it ({', '.join(unasked[:4])}"
+        f"{' …' if len(unasked) > 4 else ''}) were not asked for: distances see them at second "
+        "order only, so this fit takes the arm to be flat. If it may not be (a tilt of 1 mrad "
+        "moves a 1 m arm's tool 1 mm out of its plane, which no residual here shows), ask "
+        "for all parameters (the fit then says whether the distances can tell) or measure "
+        "some positions."
+    )
 
 
 WORKSPACE_PAIRS = 800

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.parameters import unit
 from ..model.robot import Robot
 from .analysis import analyse
 from .audit import CHI2_LEVEL, Check
@@ -391,10 +392,7 @@ def _values(nominal: Robot, a: Robot, b: Robot, names, q, most: int = 3) -> str:
     p = a.position(q)
     reach = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
     pa, pb, p0 = a.parameters, b.parameters, nominal.parameters
-    angle = {
-        n: n.startswith(("theta", "alpha", "beta")) or n[-3:] in ("_rx", "_ry", "_rz")
-        for n in names
-    }
+    angle = {n: unit(n) == "rad" for n in names}  # a URDF origin's roll … offset too
     weight = {n: abs(pb[n] - pa[n]) * (reach if angle[n] else 1.0) for n in names}
     largest = max(weight.values(), default=0.0)
     order = sorted(names, key=lambda n: (not n.startswith(("alpha", "beta")), -weight[n]))

@@ -49,6 +49,38 @@ def door(robot: Robot, measurements: Measurements) -> None:
     at_the_door(robot, measurements.q, measurements.points)
 
 
+def size_of(nominal: Robot, fitted: Robot, q: np.ndarray):
+    """The similarity (`casecal.data.units.similarity`) of `fitted`'s measured points to
+    `nominal`'s over poses across the joint ranges (the measured poses `q` without
+    limits): its ``scale`` is how much larger the fitted robot is."""
+    try:
+        poses = uniform(nominal, SIZE_POSES, seed=0)
+        if nominal.inputs:
+            poses = np.column_stack([poses, np.tile(q[0, nominal.dof :], (len(poses), 1))])
+        a, b = nominal.measured_points(poses), fitted.measured_points(poses)
+    except (ValueError, TypeError):  # no limits to draw from: the measured poses
+        a, b = nominal.measured_points(q), fitted.measured_points(q)
+    return similarity(a.reshape(-1, 3), b.reshape(-1, 3)), a, b
+
+
+def board_size_check(nominal: Robot, fitted: Robot, q: np.ndarray, spacing: float) -> Check:
+    """**robot keeps its size** for a camera calibration, whose only length is the board's
+    spacing: a fitted robot off by more than `SIZE_LIMIT` is a spacing in another unit."""
+    size = size_of(nominal, fitted, q)[0]
+    if not size.spread_nominal > 1e-6 or not math.isfinite(size.scale):
+        return Check(NAME, None, "the nominal robot's measured points do not move")
+    text = f"the calibrated robot is {size.scale:.4g}× the nominal's size over its joint ranges"
+    if _within(size.scale):
+        return Check(NAME, True, text)
+    return Check(
+        NAME,
+        False,
+        f"{text}: the board's spacing ({spacing * 1e3:g} mm a square) sets the scale of every "
+        f"length, and it is likely {ratio_text(size.scale)} the board's: check its unit "
+        "(board_spacing_mm in a camera file; Checkerboard.spacing in m). Do not use this robot",
+    )
+
+
 def size_check(nominal: Robot, fitted: Robot, q: np.ndarray, y: np.ndarray) -> Check:
     """The check of the module doc.
 
@@ -61,14 +93,7 @@ def size_check(nominal: Robot, fitted: Robot, q: np.ndarray, y: np.ndarray) -> C
     y : ndarray, shape (N, m, 3)
         The measured points, m.
     """
-    try:
-        poses = uniform(nominal, SIZE_POSES, seed=0)
-        if nominal.inputs:
-            poses = np.column_stack([poses, np.tile(q[0, nominal.dof :], (len(poses), 1))])
-        a, b = nominal.measured_points(poses), fitted.measured_points(poses)
-    except (ValueError, TypeError):  # no limits to draw from: the measured poses
-        a, b = nominal.measured_points(q), fitted.measured_points(q)
-    size = similarity(a.reshape(-1, 3), b.reshape(-1, 3))
+    size, a, b = size_of(nominal, fitted, q)
     if not size.spread_nominal > 1e-6 or not math.isfinite(size.scale):
         return Check(NAME, None, "the nominal robot's measured points do not move")
     ratio, what, k = size.scale, "the calibrated robot is", slice(None)

@@ -10,6 +10,8 @@ from ..data.measurements import Measurements
 from ..design.poses import rng_from
 from ..errors import CalibrationError
 from ..model.robot import Robot
+from ..observations.pixels import PixelMeasurements
+from .camera_validation import validate_camera
 from .fit import identify
 
 CONVERGENCE_CHECKS = ("converged", "residual did not grow")
@@ -113,7 +115,7 @@ def refit_frames(robot: Robot, measurements: Measurements) -> tuple[ErrorStats, 
     return ErrorStats.of(cal.residuals), None if rotations is None else _rotation_stats(rotations)
 
 
-def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> Validation:
+def validate(calibrated: Robot, measurements: Measurements, nominal: Robot, camera=None):
     """Compare `nominal` and `calibrated` on held-out `measurements` (frames refitted).
 
     Parameters
@@ -121,15 +123,23 @@ def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> V
     calibrated, nominal : Robot
         The same structure; the nominal gets the calibrated robot's reflector layout as
         its starting guess when it has none.
-    measurements : Measurements
-        Poses not used in the calibration.
+    measurements : Measurements or PixelMeasurements
+        Poses (or a camera's views) not used in the calibration.
+    camera : CameraSetup, optional
+        For views: the calibration's fitted camera (`Calibration.camera.setup`).
+
+    Returns
+    -------
+    Validation, or `casecal.identification.camera_validation.CameraValidation` for views.
     """
+    if isinstance(measurements, PixelMeasurements):
+        return validate_camera(calibrated, camera, measurements, nominal)
     if not isinstance(measurements, Measurements):
         raise CalibrationError(
-            f"validate takes a tracker's Measurements, not {type(measurements).__name__}; for "
-            "a camera, predict held-out views with casecal.observations.simulate."
-            "simulate_pixels(cal.robot, q, cal.camera.setup) and compare their pixels"
+            f"validate takes Measurements or PixelMeasurements, not {type(measurements).__name__}"
         )
+    if camera is not None:
+        raise CalibrationError("camera= is for a camera's views (PixelMeasurements) only")
     if measurements.contact:
         raise CalibrationError(
             "validating on contact sessions (fixed points, planes) is not supported yet: "
@@ -147,8 +157,9 @@ def validate(calibrated: Robot, measurements: Measurements, nominal: Robot) -> V
     return Validation(before, after, measurements.n_poses, rotation_before, rotation_after)
 
 
-def split(measurements: Measurements, fraction: float, seed=0):
-    """Random (fit, held-out) split of the poses; `fraction` of them are held out."""
+def split(measurements, fraction: float, seed=0):
+    """Random (fit, held-out) split of the poses (or a camera's views); `fraction` of them
+    are held out."""
     if not isinstance(fraction, int | float) or not 0 < fraction < 1:
         raise CalibrationError(f"holdout fraction must be between 0 and 1, got {fraction}")
     n = measurements.n_poses
@@ -157,5 +168,6 @@ def split(measurements: Measurements, fraction: float, seed=0):
         raise CalibrationError(f"holdout {fraction} of {n} poses leaves no poses on one side")
     held = np.zeros(n, bool)
     held[rng_from(seed).choice(n, size=k, replace=False)] = True
-
+    if isinstance(measurements, PixelMeasurements):
+        return measurements.subset(~held), measurements.subset(held)
     return measurements.take(~held), measurements.take(held)

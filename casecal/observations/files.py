@@ -65,6 +65,11 @@ def read_pixels(
     for column in df.columns:
         match = _CORNER.match(str(column))
         if match:
+            if match.group(1) != str(int(match.group(1))):
+                raise CalibrationError(
+                    f"{label}: column {column!r}: corner numbers are written without leading "
+                    f"zeros (c{int(match.group(1))}_{match.group(2)}_px)"
+                )
             found.setdefault(int(match.group(1)), set()).add(match.group(2))
     if not found:
         raise CalibrationError(
@@ -85,7 +90,10 @@ def read_pixels(
         for j, axis in enumerate("uv"):
             uv[:, k, j] = _cells(df, f"c{k}_{axis}_px", label)
     sigma = _sigma(df, label, sigma_px)
-    return PixelMeasurements(q, uv, setup, sigma, fit_intrinsics)
+    try:
+        return PixelMeasurements(q, uv, setup, sigma, fit_intrinsics)
+    except CalibrationError as exc:  # say which file (its rows are views + 2)
+        raise CalibrationError(f"{label}: {exc} (file row = view + 2)") from None
 
 
 def write_pixels(path, measurements: PixelMeasurements, robot: Robot) -> None:
@@ -173,11 +181,11 @@ def read_camera(path) -> CameraSetup:
 
     label = str(path)
     try:
-        table = tomllib.loads(read_text(path, "camera file"))["camera"]
+        table = tomllib.loads(read_text(path, "camera file")).get("camera")
     except tomllib.TOMLDecodeError as exc:
         raise CalibrationError(f"{label}: not TOML ({exc})") from None
-    except KeyError:
-        raise CalibrationError(f"{label}: no [camera] table; {_keys_text()}") from None
+    if not isinstance(table, dict):
+        raise CalibrationError(f"{label}: no [camera] table; {_keys_text()}")
     optional = {"distortion"}
     missing = [k for k in CAMERA_KEYS if k not in table and k not in optional]
     unknown = [k for k in table if k not in CAMERA_KEYS]
@@ -201,14 +209,23 @@ def read_camera(path) -> CameraSetup:
         T[:3, 3] = numbers(f"{prefix}_xyz_mm", 3) * 1e-3
         return T
 
+    for key in ("fx", "fy", "cx", "cy"):
+        if isinstance(table[key], bool) or not isinstance(table[key], int | float):
+            raise CalibrationError(f"{label}: [camera] {key} must be a number (px), not text")
+    size = numbers("image_size", 2)
+    if np.any(size != np.round(size)):
+        raise CalibrationError(f"{label}: [camera] image_size must be whole pixels")
     distortion = numbers("distortion", 5) if "distortion" in table else np.zeros(5)
-    lens = Intrinsics(table["fx"], table["fy"], table["cx"], table["cy"], *distortion)
     spacing = table["board_spacing_mm"]
     if isinstance(spacing, bool) or not isinstance(spacing, int | float):
         raise CalibrationError(f"{label}: [camera] board_spacing_mm must be a number (mm)")
-    board = Checkerboard(table["board_rows"], table["board_cols"], spacing * 1e-3)
-    size = tuple(int(v) for v in numbers("image_size", 2))
-    return CameraSetup(table["mode"], pose("camera"), pose("target"), lens, board, size)
+    shape = (int(size[0]), int(size[1]))
+    try:
+        lens = Intrinsics(table["fx"], table["fy"], table["cx"], table["cy"], *distortion)
+        board = Checkerboard(table["board_rows"], table["board_cols"], spacing * 1e-3)
+        return CameraSetup(table["mode"], pose("camera"), pose("target"), lens, board, shape)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{label}: [camera] {exc}") from None
 
 
 def camera_text(setup: CameraSetup, comment: str = "") -> str:

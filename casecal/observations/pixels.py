@@ -18,6 +18,10 @@ import numpy as np
 from ..errors import CalibrationError
 from .simulate import CameraSetup, simulate_pixels
 
+OUTSIDE_PX = 1.0
+"""How far (px) past the image's edge a detected corner may lie (sub-pixel refinement
+near the border) before the image size and the pixels are taken to disagree."""
+
 
 @dataclass(frozen=True, eq=False)
 class PixelMeasurements:
@@ -73,6 +77,22 @@ class PixelMeasurements:
             first = int(np.flatnonzero(missing[..., 0].all(axis=1))[0])
             raise CalibrationError(
                 f"PixelMeasurements: view {first} has no corner found; leave such views out"
+            )
+        width, height = self.setup.image_size
+        with np.errstate(invalid="ignore"):
+            outside = (
+                (uv[..., 0] < -OUTSIDE_PX - 0.5)
+                | (uv[..., 0] > width - 0.5 + OUTSIDE_PX)
+                | (uv[..., 1] < -OUTSIDE_PX - 0.5)
+                | (uv[..., 1] > height - 0.5 + OUTSIDE_PX)
+            )
+        if outside.any():
+            view, corner = (int(v[0]) for v in np.nonzero(outside))
+            raise CalibrationError(
+                f"PixelMeasurements: {int(outside.sum())} corners lie outside the setup's "
+                f"{width} × {height} image (first: view {view}, corner {corner} at "
+                f"{uv[view, corner].round(1).tolist()} px); give the camera's image_size, "
+                "and pixels of that image (u along its rows, v down)"
             )
         sigma = self.sigma_px
         if isinstance(sigma, np.ndarray) and sigma.ndim == 0:

@@ -36,6 +36,9 @@ from ..errors import CalibrationError
 MAX_SPACING = 0.5
 """Side of a square (m) past which a board's spacing is taken for a unit slip."""
 
+MIN_SPACING = 1e-3
+"""Side of a square (m) below which a board's spacing is taken for a unit slip."""
+
 
 @dataclass(frozen=True)
 class Checkerboard:
@@ -70,6 +73,12 @@ class Checkerboard:
         if not (math.isfinite(spacing) and spacing > 0):
             raise CalibrationError(
                 f"Checkerboard: spacing = {self.spacing!r}; give the side of a square in m, > 0"
+            )
+        if spacing < MIN_SPACING:
+            raise CalibrationError(
+                f"Checkerboard: spacing = {spacing:g} m, a square smaller than "
+                f"{MIN_SPACING * 1e3:g} mm; the side of a square in m (m for mm? "
+                f"{spacing:g} m is {spacing * 1e3:g} mm)"
             )
         if spacing > MAX_SPACING:
             raise CalibrationError(
