@@ -69,6 +69,10 @@ def test_wrong_files_are_refused_with_what_to_fix(tmp_path, puma):
     path.write_text("\n".join([text[0], text[1], ",".join(cells), *text[3:]]) + "\n")
     with pytest.raises(CalibrationError, match=r"row 3, column 'c0_v_px': 'abc'"):
         read_pixels(path, puma, nominal)
+    text[0] = "session," + text[0]
+    path.write_text("\n".join([text[0], *("A," + line for line in text[1:])]) + "\n")
+    with pytest.raises(CalibrationError, match=r"a session column.*not read yet"):
+        read_pixels(path, puma, nominal)
     camera = tmp_path / "camera.toml"
     camera.write_text(camera_text(truth).replace("fx = ", "f_x = "))
     with pytest.raises(CalibrationError, match=r"missing fx.*fx \(focal length along u, px\)"):

@@ -13,7 +13,7 @@ what the lens is (`CameraFit`).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
@@ -62,6 +62,9 @@ class CameraFit:
         Measured minus modelled pixels after and before, px; NaN where a corner was not found.
     sigma_px : float
         The pixel noise the fit was weighed with, px.
+    sessions : dict of str to CameraSetup
+        With sessions (`PixelMeasurements.session`): each session's fitted camera, the
+        first's being `setup`; empty without.
     """
 
     setup: CameraSetup
@@ -69,6 +72,7 @@ class CameraFit:
     pixel_residuals: np.ndarray
     pixel_residuals_before: np.ndarray
     sigma_px: float
+    sessions: dict = field(default_factory=dict)
 
     @property
     def rms_px(self) -> float:
@@ -94,7 +98,7 @@ def pixel_arrays(robot: Robot, measurements: PixelMeasurements):
     """The object-space data of a `PixelProblem` at the nominal camera: ``y`` (N, c, 3),
     ``w`` (N, 3) and its `View` (`casecal.identification.pixel_problem`)."""
     setup = measurements.setup
-    p_cam = points_in_camera(robot, measurements.q, setup)
+    p_cam = corners_in_camera(robot, measurements)
     depth = p_cam[..., 2].mean(axis=1)
     behind = np.flatnonzero(~np.all(p_cam[..., 2] > 0, axis=1))
     if behind.size:
@@ -174,16 +178,36 @@ def pixel_residuals(problem: PixelProblem, x: np.ndarray) -> np.ndarray:
     return np.where(problem.view.found[..., None], r, np.nan)
 
 
+def corners_in_camera(robot: Robot, measurements: PixelMeasurements) -> np.ndarray:
+    """The board's corners in the camera frame at the nominal camera of each view's
+    session, m, (N, c, 3)."""
+    if measurements.session is None:
+        return points_in_camera(robot, measurements.q, measurements.setup)
+    out = np.empty((*measurements.pixels.shape[:2], 3))
+    for label in measurements.labels:
+        rows = measurements.session == label
+        out[rows] = points_in_camera(robot, measurements.q[rows], measurements.setup_of(label))
+    return out
+
+
 def camera_problem(robot: Robot, measurements: PixelMeasurements):
     """The rig and a `make(rig, names=..., kernel_names=..., memo=...)` of its problems."""
-    rig = rig_robot(robot, measurements.setup)
+    labels = measurements.labels
+    later = [(label, measurements.setup_of(label)) for label in labels[1:]]
+    rig = rig_robot(robot, measurements.setup, later)
     if measurements.q.shape[1] != robot.dof:
         raise CalibrationError(
             f"camera measurements have {measurements.q.shape[1]} joint values per view but "
             f"robot {robot.name!r} has {robot.dof} joints; use the robot the data came from"
         )
     y, w, view = pixel_arrays(robot, measurements)
-    return rig, partial(PixelProblem, q=measurements.q, y=y, w=w, view=view)
+    q = measurements.q
+    if later:  # each later session's indicator selects its own base (`Robot.sessions`)
+        index = np.array([labels.index(label) for label in measurements.session.tolist()])
+        indicators = np.zeros((len(q), len(later)))
+        indicators[np.flatnonzero(index), index[index > 0] - 1] = 1.0
+        q = np.ascontiguousarray(np.hstack([q, indicators]))
+    return rig, partial(PixelProblem, q=q, y=y, w=w, view=view)
 
 
 def identify_camera(
@@ -262,6 +286,12 @@ def identify_camera(
         pixel_residuals=pixel_residuals(got.estimated, x0),
         pixel_residuals_before=pixel_residuals(before, np.zeros(len(names))),
         sigma_px=measurements.sigma_px,
+        sessions={}
+        if measurements.session is None
+        else {
+            label: fitted_setup(out.robot, robot, measurements.setup_of(label), k)
+            for k, label in enumerate(measurements.labels)
+        },
     )
     if status < 0 and camera.rms_px_before > FAR_PX:
         message = f"{gross_causes(camera.rms_px_before)}; {message}"

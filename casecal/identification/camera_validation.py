@@ -83,7 +83,16 @@ def validate_camera(
             "the held-out views' camera has another mode or board than the calibration's; "
             "validate views of the same camera and board"
         )
-    fitted = dataclasses.replace(measurements, setup=camera, fit_intrinsics=False)
+    # the poses start from the views' nominal ones and are refitted; only the lens differs
+    lens = camera.intrinsics
+    fitted = dataclasses.replace(
+        measurements,
+        setup=dataclasses.replace(measurements.setup, intrinsics=lens),
+        setups={k: dataclasses.replace(v, intrinsics=lens) for k, v in measurements.setups.items()}
+        if measurements.setups
+        else None,
+        fit_intrinsics=False,
+    )
     known = dataclasses.replace(measurements, fit_intrinsics=False)
     before = _refit(nominal, known)
     after = _refit(calibrated, fitted)

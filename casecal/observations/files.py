@@ -59,6 +59,12 @@ def read_pixels(
         of a corner's pair empty, no σ, or anything `casecal.read_csv` refuses in the joints.
     """
     df, label = read_table(path, "camera measurement file")
+    if "session" in df:
+        raise CalibrationError(
+            f"{label}: a session column; camera files of several sessions (the camera or "
+            "board placed anew) are not read yet: fit them through the API, "
+            "PixelMeasurements(q, pixels, setup, sigma_px, session=..., setups=...)"
+        )
     q = read_joints(df, robot, label)
     n = setup.board.n_corners
     found = {}

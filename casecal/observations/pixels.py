@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CalibrationError
+from ..model.parameters import check_session_label
 from .simulate import CameraSetup, simulate_pixels
 
 OUTSIDE_PX = 1.0
@@ -44,6 +45,13 @@ class PixelMeasurements:
     fit_intrinsics : bool
         Estimate the intrinsics (default). False: they are known (``setup.intrinsics``
         from a separate camera calibration) and held.
+    session : ndarray of str, shape (N,), optional
+        Each view's session: the board (eye-in-hand) or the camera (eye-to-hand) placed
+        anew, so that the views cover more of the joint space. The first label's views
+        are seen with `setup`; every later label's with its own in `setups`.
+    setups : dict of str to CameraSetup, optional
+        The nominal camera of each later session: the same mode, lens, board and image,
+        the moved pose its own (the camera's eye-to-hand, the board's eye-in-hand).
     """
 
     q: np.ndarray
@@ -51,6 +59,8 @@ class PixelMeasurements:
     setup: CameraSetup
     sigma_px: float
     fit_intrinsics: bool = True
+    session: np.ndarray | None = None
+    setups: dict | None = None
 
     def __post_init__(self) -> None:
         q = np.asarray(self.q, dtype=float)
@@ -114,6 +124,7 @@ class PixelMeasurements:
             )
         object.__setattr__(self, "sigma_px", float(sigma))
         object.__setattr__(self, "fit_intrinsics", bool(self.fit_intrinsics))
+        self._check_sessions(len(q))
 
     @property
     def n_poses(self) -> int:
@@ -125,10 +136,79 @@ class PixelMeasurements:
         """Which corners were found in which view, (N, corners) bool."""
         return ~np.isnan(self.pixels[..., 0])
 
+    def _check_sessions(self, n: int) -> None:
+        if self.session is None:
+            if self.setups:
+                raise CalibrationError(
+                    "PixelMeasurements: setups without a session per view; give session="
+                )
+            return
+        session = np.asarray(self.session)
+        if session.shape != (n,):
+            raise CalibrationError(
+                f"PixelMeasurements: session of shape {session.shape}; give one label per view"
+            )
+        labels = list(dict.fromkeys(session.tolist()))
+        for label in labels:
+            check_session_label(label, "PixelMeasurements.session")
+        setups = dict(self.setups or {})
+        later = labels[1:]
+        if sorted(setups) != sorted(later):
+            raise CalibrationError(
+                f"PixelMeasurements: sessions {labels}: give setups= a nominal camera for each "
+                f"session after the first ({', '.join(later) or 'none'}), got "
+                f"{', '.join(map(str, setups)) or 'none'}"
+            )
+        first = self.setup
+        for label, other in setups.items():
+            same = (
+                isinstance(other, CameraSetup)
+                and other.mode == first.mode
+                and other.board == first.board
+                and other.intrinsics == first.intrinsics
+                and other.image_size == first.image_size
+            )
+            moved = "camera" if first.mode == "eye_to_hand" else "target"
+            kept = "target" if moved == "camera" else "camera"
+            if not same or not np.array_equal(getattr(other, kept), getattr(first, kept)):
+                raise CalibrationError(
+                    f"PixelMeasurements: session {label!r}'s setup must be the first's with "
+                    f"only its {moved} pose moved (one lens, board and image; the "
+                    f"{kept}'s pose shared, {first.mode})"
+                )
+        session.setflags(write=False)
+        object.__setattr__(self, "session", session)
+        object.__setattr__(self, "setups", setups)
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """The sessions in order of appearance (one, "", without sessions)."""
+        if self.session is None:
+            return ("",)
+        return tuple(dict.fromkeys(self.session.tolist()))
+
+    def setup_of(self, label: str) -> CameraSetup:
+        """The nominal camera of session `label`."""
+        return self.setup if label == self.labels[0] else self.setups[label]
+
     def subset(self, rows) -> PixelMeasurements:
-        """The views `rows` (indices or a boolean mask)."""
+        """The views `rows` (indices or a boolean mask); the sessions they keep, the first
+        of them seen with its own setup."""
+        if self.session is None:
+            return PixelMeasurements(
+                self.q[rows], self.pixels[rows], self.setup, self.sigma_px, self.fit_intrinsics
+            )
+        session = self.session[rows]
+        labels = list(dict.fromkeys(session.tolist()))
+        setups = {label: self.setup_of(label) for label in labels[1:]}
         return PixelMeasurements(
-            self.q[rows], self.pixels[rows], self.setup, self.sigma_px, self.fit_intrinsics
+            self.q[rows],
+            self.pixels[rows],
+            self.setup_of(labels[0]),
+            self.sigma_px,
+            self.fit_intrinsics,
+            session,
+            setups,
         )
 
 

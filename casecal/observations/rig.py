@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import CalibrationError
 from ..model.frames import rpy_from_matrix
 from ..model.parameters import Unit
-from ..model.robot import Frame, Robot
+from ..model.robot import Frame, Robot, Session
 from ..model.terms import ErrorTerm
 from .camera import INTRINSIC_NAMES, Intrinsics
 from .simulate import CameraSetup, inverse
@@ -48,7 +48,7 @@ def _moves_nothing(ctx, term) -> ca.SX:
     return ca.SX(0.0)
 
 
-def rig_robot(robot: Robot, setup: CameraSetup) -> Robot:
+def rig_robot(robot: Robot, setup: CameraSetup, later=()) -> Robot:
     """`robot` with the camera's and the board's poses as its base and tool frames, and
     the intrinsics as parameters (module doc).
 
@@ -66,7 +66,8 @@ def rig_robot(robot: Robot, setup: CameraSetup) -> Robot:
     if robot.sessions or robot.inputs:
         raise CalibrationError(
             "camera calibration of a robot with sessions or per-pose inputs is not supported "
-            "yet; give one session without inputs"
+            "yet; give the robot without them (the views' sessions are "
+            "PixelMeasurements.session's)"
         )
     if "R" not in robot.joint_types:
         raise CalibrationError(
@@ -79,10 +80,9 @@ def rig_robot(robot: Robot, setup: CameraSetup) -> Robot:
             "rename them"
         )
     B, Tl = robot.base.matrix(), robot.tool.matrix()
-    if setup.mode == "eye_to_hand":
-        base, tool = inverse(setup.camera) @ B, Tl @ setup.target
-    else:
-        base, tool = inverse(setup.target) @ B, Tl @ setup.camera
+    base = _base(setup, B)
+    tool = Tl @ (setup.target if setup.mode == "eye_to_hand" else setup.camera)
+    sessions = tuple(Session(label, _frame(_base(other, B))) for label, other in later)
     units = (PIXEL,) * 4 + (COEFFICIENT,) * 5
     term = ErrorTerm(
         KIND,
@@ -92,8 +92,14 @@ def rig_robot(robot: Robot, setup: CameraSetup) -> Robot:
         values=tuple(setup.intrinsics.vector().tolist()),
         units=units,
     )
-    rig = dataclasses.replace(robot, base=_frame(base), tool=_frame(tool))
+    rig = dataclasses.replace(robot, base=_frame(base), tool=_frame(tool), sessions=sessions)
     return rig.with_terms(term)
+
+
+def _base(setup: CameraSetup, B: np.ndarray) -> np.ndarray:
+    """The rig's base frame: the robot's base seen from the camera (eye-to-hand) or from
+    the board (eye-in-hand)."""
+    return inverse(setup.camera if setup.mode == "eye_to_hand" else setup.target) @ B
 
 
 def is_rig(robot: Robot) -> bool:
@@ -121,15 +127,17 @@ def intrinsics_of(rig: Robot) -> Intrinsics:
     return Intrinsics.from_vector([rig.parameters[n] for n in INTRINSIC_PARAMETERS])
 
 
-def fitted_setup(rig: Robot, robot: Robot, setup: CameraSetup) -> CameraSetup:
-    """The camera a fitted `rig` stands for, with `robot`'s own base and tool frames.
+def fitted_setup(rig: Robot, robot: Robot, setup: CameraSetup, session: int = 0) -> CameraSetup:
+    """The camera a fitted `rig` stands for in its `session` (0: the first), with
+    `robot`'s own base and tool frames.
 
     ``fk = base · chain · tool`` of the rig equals the camera-to-board chain; with the
     user's base B and tool Tl kept, the camera and board poses are what makes the products
     equal (module doc).
     """
     B, Tl = robot.base.matrix(), robot.tool.matrix()
-    base, tool = rig.base.matrix(), rig.tool.matrix()
+    frame = rig.base if session == 0 else rig.sessions[session - 1].base
+    base, tool = frame.matrix(), rig.tool.matrix()
     if setup.mode == "eye_to_hand":
         camera, target = B @ inverse(base), inverse(Tl) @ tool
     else:
