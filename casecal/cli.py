@@ -176,13 +176,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     if meas.n_poses >= PROGRESS_POSES and sys.stderr.isatty():
         print(file=sys.stderr)  # end the progress line
     print(cal.summary())
-    if args.strict and cal.unidentifiable:
-        raise CalibrationError(
-            f"--strict: the data cannot identify {', '.join(cal.unidentifiable)}; ask for "
-            "fewer parameters or measure more varied poses (nothing written)"
-        )
-    if not cal.success:
-        raise CalibrationError(f"the fit did not pass ({cal.message}); nothing written")
+    _check_fit(cal, args.strict, "poses")
     cal = _without_poorly_determined(cal, meas, options, args.strict)
     # what was asked to be written is written as soon as the fit is good
     _write_outputs(args, cal)
@@ -193,6 +187,17 @@ def _cmd_identify(args: argparse.Namespace) -> None:
         except CalibrationError as exc:
             written = " (the calibrated files above were written)" if args.output else ""
             raise CalibrationError(f"hold-out validation failed{written}: {exc}") from None
+
+
+def _check_fit(cal, strict: bool, what: str) -> None:
+    """Refuse to write a fit that failed, or (--strict) one that left parameters blind."""
+    if strict and cal.unidentifiable:
+        raise CalibrationError(
+            f"--strict: the data cannot identify {', '.join(cal.unidentifiable)}; ask for "
+            f"fewer parameters or measure more varied {what} (nothing written)"
+        )
+    if not cal.success:
+        raise CalibrationError(f"the fit did not pass ({cal.message}); nothing written")
 
 
 def _without_poorly_determined(cal, meas, options, strict):
@@ -267,7 +272,7 @@ def _identify_distances(args: argparse.Namespace, robot) -> None:
 
 def _identify_camera(args: argparse.Namespace, robot) -> None:
     """identify --camera: the measurement file is a camera's (`casecal.observations.files`)."""
-    from .observations.files import camera_text, read_camera, read_pixels
+    from .observations.files import camera_text, read_cameras, read_pixels
 
     unsupported = [
         flag
@@ -294,7 +299,8 @@ def _identify_camera(args: argparse.Namespace, robot) -> None:
             _check_writable_dir(os.path.dirname(os.path.abspath(out)))
     _check_robot_format(args, robot)
     sigma = None if args.sigma_px is None else float(args.sigma_px)
-    meas = read_pixels(args.measurements, robot, read_camera(args.camera), sigma)
+    setup, placements = read_cameras(args.camera)
+    meas = read_pixels(args.measurements, robot, setup, sigma, sessions=placements)
     found = int(meas.found.sum())
     print(f"{meas.n_poses} views, {found} corners found of {meas.pixels.shape[1]} per view")
     held = None
@@ -306,17 +312,12 @@ def _identify_camera(args: argparse.Namespace, robot) -> None:
         f"RMS pixel error: {cal.camera.rms_px_before:.3g} px with the camera and board "
         f"poses alone fitted, {cal.camera.rms_px:.3g} px calibrated (sigma {meas.sigma_px:g} px)"
     )
-    if args.strict and cal.unidentifiable:
-        raise CalibrationError(
-            f"--strict: the data cannot identify {', '.join(cal.unidentifiable)}; ask for "
-            "fewer parameters or measure more varied views (nothing written)"
-        )
-    if not cal.success:
-        raise CalibrationError(f"the fit did not pass ({cal.message}); nothing written")
+    _check_fit(cal, args.strict, "views")
     files = []
     if args.camera_out:
         comment = f"casecal: the camera fitted with {args.robot} from {args.measurements}"
-        files.append((args.camera_out, camera_text(cal.camera.setup, comment)))
+        later = {k: v for k, v in cal.camera.sessions.items() if k != meas.labels[0]}
+        files.append((args.camera_out, camera_text(cal.camera.setup, comment, later)))
     _write_outputs(args, cal, files)
     if args.camera_out:
         print(f"fitted camera, board and lens written to {args.camera_out}")

@@ -70,8 +70,9 @@ def test_wrong_files_are_refused_with_what_to_fix(tmp_path, puma):
     with pytest.raises(CalibrationError, match=r"row 3, column 'c0_v_px': 'abc'"):
         read_pixels(path, puma, nominal)
     text[0] = "session," + text[0]
-    path.write_text("\n".join([text[0], *("A," + line for line in text[1:])]) + "\n")
-    with pytest.raises(CalibrationError, match=r"a session column.*not read yet"):
+    rows = [f"{'AB'[k % 2]},{line}" for k, line in enumerate(text[1:])]
+    path.write_text("\n".join([text[0], *rows]) + "\n")
+    with pytest.raises(CalibrationError, match=r"sessions A, B in the views, placements none"):
         read_pixels(path, puma, nominal)
     camera = tmp_path / "camera.toml"
     camera.write_text(camera_text(truth).replace("fx = ", "f_x = "))
@@ -118,3 +119,46 @@ def test_the_command_line_calibrates_from_camera_files(tmp_path, puma, capsys):
     assert "--loss cannot be used with --camera" in capsys.readouterr().err
     assert main(["identify", "puma560", str(views), "--sigma-px", "0.3"]) == 2
     assert "--sigma-px needs --camera" in capsys.readouterr().err
+
+
+def test_placements_from_files_and_the_command_line(tmp_path, puma, capsys):
+    """Two placements of the camera: the views file's session column, the camera file's
+    [camera.sessions.B] table; written, read back, fitted from the shell, and the fitted
+    camera file read back with both placements."""
+    from test_camera import PUMA_Q0
+
+    from casecal.cli import main
+    from casecal.observations.files import read_cameras
+    from casecal.observations.pixels import PixelMeasurements
+    from casecal.observations.simulate import select_views, simulate_pixels
+
+    true_robot, truth, nominal, meas = scenario(puma, "eye_to_hand", views=30)
+    shift = np.eye(4)
+    shift[:3, 3] = [0.05, -0.03, 0.02]  # a second placement, 6 cm away
+
+    def placed(setup):
+        return dataclasses.replace(setup, camera=shift @ setup.camera)
+
+    moved = placed(nominal)
+    q2 = select_views(puma, 30, moved, seed=5, q_centre=PUMA_Q0, spread=0.3, max_tilt=0.9)
+    uv2 = simulate_pixels(true_robot, q2, placed(truth), sigma_px=SIGMA, seed=6)
+    labels = np.array(["A"] * 30 + ["B"] * 30)
+    both = PixelMeasurements(
+        np.vstack([meas.q, q2]), np.vstack([meas.pixels, uv2]), nominal, SIGMA, True, labels,
+        {"B": moved},
+    )  # fmt: skip
+    views, camera = tmp_path / "views.csv", tmp_path / "camera.toml"
+    write_pixels(views, both, puma)
+    camera.write_text(camera_text(nominal, sessions={"B": moved}))
+    setup, placements = read_cameras(camera)
+    again = read_pixels(views, puma, setup, sessions=placements)
+    assert again.labels == ("A", "B")
+    np.testing.assert_allclose(again.setups["B"].camera, moved.camera, atol=1e-12)
+    out = tmp_path / "fitted.toml"
+    argv = ["identify", "puma560", str(views), "--camera", str(camera), "--parameters", "all"]
+    assert main([*argv, "--camera-out", str(out)]) == 0, capsys.readouterr().out
+    fitted, later = read_cameras(out)
+    assert list(later) == ["B"]
+    cal = cc.identify(puma, again, "all")
+    np.testing.assert_allclose(later["B"].camera, cal.camera.sessions["B"].camera, atol=1e-12)
+    np.testing.assert_allclose(fitted.camera, cal.camera.setup.camera, atol=1e-12)

@@ -19,24 +19,7 @@ from ..model.robot import Robot
 from ..observations.pixels import PixelMeasurements
 from ..observations.simulate import CameraSetup
 from .camera_fit import identify_camera
-
-CONVERGENCE_CHECKS = ("converged", "residual did not grow")
-
-
-@dataclass(frozen=True)
-class PixelStats:
-    """Pixel errors of the corners found: RMS and mean of |(Δu, Δv)| and its largest, px."""
-
-    rms: float
-    mean: float
-    max: float
-    n_corners: int
-
-    @classmethod
-    def of(cls, residuals: np.ndarray) -> PixelStats:
-        e = np.linalg.norm(residuals.reshape(-1, 2), axis=1)
-        e = e[np.isfinite(e)]
-        return cls(float(np.sqrt(np.mean(e**2))), float(e.mean()), float(e.max()), e.size)
+from .held_out import ErrorStats, refitted
 
 
 @dataclass(frozen=True)
@@ -45,20 +28,21 @@ class CameraValidation:
 
     Attributes
     ----------
-    before, after : PixelStats
+    before, after : ErrorStats
+        Of the corners found, px (`n_points`: how many).
     n_views : int
     sigma_px : float
         The views' stated pixel noise: a model at the floor has RMS |(Δu, Δv)| ≈ √2 σ.
     """
 
-    before: PixelStats
-    after: PixelStats
+    before: ErrorStats
+    after: ErrorStats
     n_views: int
     sigma_px: float
 
     def __str__(self) -> str:
         rows = [
-            f"{self.n_views} held-out views, {self.after.n_corners} corners; camera and board "
+            f"{self.n_views} held-out views, {self.after.n_points} corners; camera and board "
             "poses refitted to them, the joints' parameters and the lens as calibrated",
             f"{'':8}{'RMS':>10}{'mean':>10}{'max':>10}   (px, |(du, dv)|; noise floor "
             f"{np.sqrt(2) * self.sigma_px:.3g} px RMS)",
@@ -99,17 +83,11 @@ def validate_camera(
     return CameraValidation(before, after, measurements.n_poses, measurements.sigma_px)
 
 
-def _refit(robot: Robot, measurements: PixelMeasurements) -> PixelStats:
+def _refit(robot: Robot, measurements: PixelMeasurements) -> ErrorStats:
     """Pixel errors of `robot` and the measurements' lens after refitting the poses alone."""
-    try:
-        cal = identify_camera(robot, measurements, ["base_*"])  # the poses alone: no joints
-    except CalibrationError as exc:
-        raise CalibrationError(
-            f"cannot refit the camera and board poses to the held-out views ({exc})"
-        ) from None
-    failed = [c for c in cal.audit.failures if c.name in CONVERGENCE_CHECKS]
-    if failed:
-        raise CalibrationError(
-            f"the poses did not fit the held-out views: {failed[0].name}: {failed[0].text}"
-        )
-    return PixelStats.of(cal.camera.pixel_residuals)
+    cal = refitted(  # the poses alone: no joint parameter asked for
+        lambda: identify_camera(robot, measurements, ["base_*"]),
+        "the camera and board poses",
+        "the held-out views",
+    )
+    return ErrorStats.of(cal.camera.pixel_residuals, dim=2)

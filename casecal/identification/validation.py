@@ -13,23 +13,7 @@ from ..model.robot import Robot
 from ..observations.pixels import PixelMeasurements
 from .camera_validation import validate_camera
 from .fit import identify
-
-CONVERGENCE_CHECKS = ("converged", "residual did not grow")
-
-
-@dataclass(frozen=True)
-class ErrorStats:
-    """Position errors of a model on some measurements, m (one entry per measured point)."""
-
-    rms: float
-    mean: float
-    max: float
-    n_points: int
-
-    @classmethod
-    def of(cls, residuals: np.ndarray) -> ErrorStats:
-        e = np.linalg.norm(np.asarray(residuals).reshape(-1, 3), axis=1)
-        return cls(float(np.sqrt(np.mean(e**2))), float(e.mean()), float(e.max()), e.size)
+from .held_out import ErrorStats, refitted
 
 
 @dataclass(frozen=True)
@@ -98,19 +82,12 @@ def refit_frames(robot: Robot, measurements: Measurements) -> tuple[ErrorStats, 
     if robot.is_tree:  # where each tip's marker sits: its position, as a tool's
         tool += tuple(f"{t}.{c}" for t in robot.tips for c in "xyz")
     frames = [n for n in robot.parameter_names if n.startswith(("base_", "point")) or n in tool]
-    try:
-        cal = identify(robot, measurements, frames, "gauss-newton")
-    except CalibrationError as exc:
-        raise CalibrationError(
-            f"cannot refit the frames to the held-out data ({exc}); measure more poses"
-        ) from None
-    # the nominal robot's frames cannot fit to the noise (its DH errors remain): that is
-    # what is measured here, so only a fit that did not converge is an error
-    failed = [c for c in cal.audit.failures if c.name in CONVERGENCE_CHECKS]
-    if failed:
-        raise CalibrationError(
-            f"the frames did not fit the held-out data: {failed[0].name}: {failed[0].text}"
-        )
+    cal = refitted(
+        lambda: identify(robot, measurements, frames, "gauss-newton"),
+        "the frames",
+        "the held-out data",
+        "; measure more poses",
+    )
     rotations = cal.orientation_residuals
     return ErrorStats.of(cal.residuals), None if rotations is None else _rotation_stats(rotations)
 

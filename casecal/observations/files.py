@@ -9,7 +9,9 @@ Columns:
   ``findChessboardCorners(image, (cols, rows))`` order; u along the image's rows, v down,
   origin at the centre of the top-left pixel, as OpenCV's); both cells empty where the
   detector did not find the corner;
-- optionally ``sigma_px``, one value for every row: the pixel noise σ.
+- optionally ``sigma_px``, one value for every row: the pixel noise σ;
+- optionally ``session``: each view's placement (the camera or the board placed anew),
+  every placement but one with its ``[camera.sessions.LABEL]`` table in the camera file.
 
 `read_pixels` needs the robot (for the joints) and the nominal camera (`CameraSetup`: for
 the board's size and to start the fit from); `write_pixels` writes what it reads.
@@ -34,7 +36,12 @@ _CORNER = re.compile(r"^c(\d+)_([uv])_px$")
 
 
 def read_pixels(
-    path, robot: Robot, setup: CameraSetup, sigma_px=None, fit_intrinsics: bool = True
+    path,
+    robot: Robot,
+    setup: CameraSetup,
+    sigma_px=None,
+    fit_intrinsics: bool = True,
+    sessions=None,
 ) -> PixelMeasurements:
     """Read a camera measurement file (module doc).
 
@@ -51,6 +58,9 @@ def read_pixels(
         they must agree.
     fit_intrinsics : bool
         As `PixelMeasurements`'.
+    sessions : dict of str to CameraSetup, optional
+        With a ``session`` column: the nominal camera of each placement but one, whose
+        views are seen with `setup` (`read_cameras`).
 
     Raises
     ------
@@ -59,12 +69,7 @@ def read_pixels(
         of a corner's pair empty, no σ, or anything `casecal.read_csv` refuses in the joints.
     """
     df, label = read_table(path, "camera measurement file")
-    if "session" in df:
-        raise CalibrationError(
-            f"{label}: a session column; camera files of several sessions (the camera or "
-            "board placed anew) are not read yet: fit them through the API, "
-            "PixelMeasurements(q, pixels, setup, sigma_px, session=..., setups=...)"
-        )
+    session = _sessions(df, label, sessions or {})
     q = read_joints(df, robot, label)
     n = setup.board.n_corners
     found = {}
@@ -96,8 +101,14 @@ def read_pixels(
         for j, axis in enumerate("uv"):
             uv[:, k, j] = _cells(df, f"c{k}_{axis}_px", label)
     sigma = _sigma(df, label, sigma_px)
+    setups, extra = None, {}
+    if session is not None:  # the placement seen with `setup` is the one not named
+        labels = list(dict.fromkeys(session.tolist()))
+        every = {name: sessions.get(name, setup) for name in labels}
+        setup, setups = every[labels[0]], {name: every[name] for name in labels[1:]}
+        extra = {"session": session, "setups": setups}
     try:
-        return PixelMeasurements(q, uv, setup, sigma, fit_intrinsics)
+        return PixelMeasurements(q, uv, setup, sigma, fit_intrinsics, **extra)
     except CalibrationError as exc:  # say which file (its rows are views + 2)
         raise CalibrationError(f"{label}: {exc} (file row = view + 2)") from None
 
@@ -107,6 +118,8 @@ def write_pixels(path, measurements: PixelMeasurements, robot: Robot) -> None:
     values in degrees (revolute) and millimetres (prismatic), pixels to 17 digits, empty
     cells for corners not found, and ``sigma_px``."""
     data = joint_columns(measurements.q, robot)
+    if measurements.session is not None:
+        data = {"session": measurements.session, **data}
     for k in range(measurements.pixels.shape[1]):
         for j, axis in enumerate("uv"):
             data[f"c{k}_{axis}_px"] = measurements.pixels[:, k, j]
@@ -130,6 +143,33 @@ def _cells(df: pd.DataFrame, column: str, label: str) -> np.ndarray:
         )
     values[empty] = np.nan
     return values
+
+
+def _sessions(df: pd.DataFrame, label: str, sessions: dict) -> np.ndarray | None:
+    """The ``session`` column's labels (N,), checked against the camera's placements:
+    every label but one named in `sessions`; None without the column."""
+    if "session" not in df:
+        if sessions:
+            raise CalibrationError(
+                f"{label}: the camera file has placements ({', '.join(sessions)}) but the "
+                "views have no session column saying which view is whose"
+            )
+        return None
+    values = df["session"]
+    if values.isna().any():
+        row = int(np.flatnonzero(values.isna().to_numpy())[0])
+        raise CalibrationError(f"{label}: row {row + 2}: empty session; give every view one")
+    session = values.astype(str).str.strip().to_numpy()
+    labels = list(dict.fromkeys(session.tolist()))
+    unnamed = [name for name in labels if name not in sessions]
+    unknown = [name for name in sessions if name not in labels]
+    if len(unnamed) != 1 or unknown:
+        raise CalibrationError(
+            f"{label}: sessions {', '.join(labels)} in the views, placements "
+            f"{', '.join(sessions) or 'none'} in the camera file: every session but the "
+            "[camera] table's needs its [camera.sessions.LABEL] table, and each table its views"
+        )
+    return session
 
 
 def _sigma(df: pd.DataFrame, label: str, sigma_px) -> float:
@@ -178,12 +218,23 @@ def read_camera(path) -> CameraSetup:
 
     "World" is the frame the robot's tool poses are given in (`casecal.Robot.fk`).
     """
+    return read_cameras(path)[0]
+
+
+def read_cameras(path) -> tuple[CameraSetup, dict]:
+    """The ``[camera]`` table's camera and each ``[camera.sessions.LABEL]`` table's: a
+    later placement's moved pose (``camera_xyz_mm``, ``camera_rpy_deg`` eye-to-hand;
+    ``target_…`` eye-in-hand), the rest the first's.
+
+    Returns
+    -------
+    setup : CameraSetup
+    sessions : dict of str to CameraSetup
+        Empty without session tables.
+    """
     import tomllib
 
-    from ..model.frames import matrix_from_rpy
     from ..textio import read_text
-    from .camera import Intrinsics
-    from .target import Checkerboard
 
     label = str(path)
     try:
@@ -192,12 +243,37 @@ def read_camera(path) -> CameraSetup:
         raise CalibrationError(f"{label}: not TOML ({exc})") from None
     if not isinstance(table, dict):
         raise CalibrationError(f"{label}: no [camera] table; {_keys_text()}")
+    sessions = table.pop("sessions", {})
+    if not isinstance(sessions, dict) or not all(isinstance(v, dict) for v in sessions.values()):
+        raise CalibrationError(f"{label}: [camera.sessions] must hold one table per session")
+    first = _setup(table, label, "[camera]")
+    moved = "camera" if first.mode == "eye_to_hand" else "target"
+    out = {}
+    for name, pose in sessions.items():
+        keys = {f"{moved}_xyz_mm", f"{moved}_rpy_deg"}
+        where = f"[camera.sessions.{name}]"
+        if set(pose) != keys:
+            raise CalibrationError(
+                f"{label}: {where} gives {', '.join(sorted(keys))}: the {moved}'s pose of that "
+                f"placement ({first.mode}), nothing else"
+            )
+        whole = {**_setup_keys(first), **pose}
+        out[name] = _setup(whole, label, where)
+    return first, out
+
+
+def _setup(table: dict, label: str, where: str) -> CameraSetup:
+    """A `CameraSetup` from a ``[camera]`` table (`CAMERA_KEYS`)."""
+    from ..model.frames import matrix_from_rpy
+    from .camera import Intrinsics
+    from .target import Checkerboard
+
     optional = {"distortion"}
     missing = [k for k in CAMERA_KEYS if k not in table and k not in optional]
     unknown = [k for k in table if k not in CAMERA_KEYS]
     if missing or unknown:
         what = f"missing {', '.join(missing)}" if missing else f"unknown {', '.join(unknown)}"
-        raise CalibrationError(f"{label}: [camera] {what}; {_keys_text()}")
+        raise CalibrationError(f"{label}: {where} {what}; {_keys_text()}")
 
     def numbers(key, n):
         value = table[key]
@@ -206,7 +282,7 @@ def read_camera(path) -> CameraSetup:
             or len(value) != n
             or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
         ):
-            raise CalibrationError(f"{label}: [camera] {key} must be {n} numbers")
+            raise CalibrationError(f"{label}: {where} {key} must be {n} numbers")
         return np.array(value, dtype=float)
 
     def pose(prefix):
@@ -215,50 +291,64 @@ def read_camera(path) -> CameraSetup:
         T[:3, 3] = numbers(f"{prefix}_xyz_mm", 3) * 1e-3
         return T
 
-    for key in ("fx", "fy", "cx", "cy"):
+    for key in ("fx", "fy", "cx", "cy", "board_spacing_mm"):
         if isinstance(table[key], bool) or not isinstance(table[key], int | float):
-            raise CalibrationError(f"{label}: [camera] {key} must be a number (px), not text")
+            raise CalibrationError(f"{label}: {where} {key} must be a number, not text")
     size = numbers("image_size", 2)
     if np.any(size != np.round(size)):
-        raise CalibrationError(f"{label}: [camera] image_size must be whole pixels")
+        raise CalibrationError(f"{label}: {where} image_size must be whole pixels")
     distortion = numbers("distortion", 5) if "distortion" in table else np.zeros(5)
-    spacing = table["board_spacing_mm"]
-    if isinstance(spacing, bool) or not isinstance(spacing, int | float):
-        raise CalibrationError(f"{label}: [camera] board_spacing_mm must be a number (mm)")
     shape = (int(size[0]), int(size[1]))
     try:
         lens = Intrinsics(table["fx"], table["fy"], table["cx"], table["cy"], *distortion)
-        board = Checkerboard(table["board_rows"], table["board_cols"], spacing * 1e-3)
+        spacing = table["board_spacing_mm"] * 1e-3
+        board = Checkerboard(table["board_rows"], table["board_cols"], spacing)
         return CameraSetup(table["mode"], pose("camera"), pose("target"), lens, board, shape)
     except CalibrationError as exc:
-        raise CalibrationError(f"{label}: [camera] {exc}") from None
+        raise CalibrationError(f"{label}: {where} {exc}") from None
 
 
-def camera_text(setup: CameraSetup, comment: str = "") -> str:
-    """The TOML text of `setup` that `read_camera` reads back (poses to 1e-12 mm, deg)."""
+def _setup_keys(setup: CameraSetup) -> dict:
+    """`setup` as the values of a ``[camera]`` table (`CAMERA_KEYS`)."""
     from ..model.frames import rpy_from_matrix
 
-    def vector(values) -> str:
-        return "[" + ", ".join(f"{float(v):.17g}" for v in values) + "]"
-
     lens = setup.intrinsics
-    lines = [f"# {line}" for line in comment.splitlines()] + [
-        "[camera]",
-        f'mode = "{setup.mode}"',
-        f"camera_xyz_mm = {vector(setup.camera[:3, 3] * 1e3)}",
-        f"camera_rpy_deg = {vector(np.degrees(rpy_from_matrix(setup.camera[:3, :3])))}",
-        f"target_xyz_mm = {vector(setup.target[:3, 3] * 1e3)}",
-        f"target_rpy_deg = {vector(np.degrees(rpy_from_matrix(setup.target[:3, :3])))}",
-        f"fx = {lens.fx:.17g}",
-        f"fy = {lens.fy:.17g}",
-        f"cx = {lens.cx:.17g}",
-        f"cy = {lens.cy:.17g}",
-        f"distortion = {vector([lens.k1, lens.k2, lens.p1, lens.p2, lens.k3])}",
-        f"image_size = [{setup.image_size[0]}, {setup.image_size[1]}]",
-        f"board_rows = {setup.board.rows}",
-        f"board_cols = {setup.board.cols}",
-        f"board_spacing_mm = {setup.board.spacing * 1e3:.17g}",
-    ]
+    return {
+        "mode": setup.mode,
+        "camera_xyz_mm": (setup.camera[:3, 3] * 1e3).tolist(),
+        "camera_rpy_deg": np.degrees(rpy_from_matrix(setup.camera[:3, :3])).tolist(),
+        "target_xyz_mm": (setup.target[:3, 3] * 1e3).tolist(),
+        "target_rpy_deg": np.degrees(rpy_from_matrix(setup.target[:3, :3])).tolist(),
+        "fx": lens.fx,
+        "fy": lens.fy,
+        "cx": lens.cx,
+        "cy": lens.cy,
+        "distortion": [lens.k1, lens.k2, lens.p1, lens.p2, lens.k3],
+        "image_size": list(setup.image_size),
+        "board_rows": setup.board.rows,
+        "board_cols": setup.board.cols,
+        "board_spacing_mm": setup.board.spacing * 1e3,
+    }
+
+
+def camera_text(setup: CameraSetup, comment: str = "", sessions=None) -> str:
+    """The TOML text of `setup` (and of later placements, `sessions`: label → CameraSetup,
+    only their moved pose written) that `read_cameras` reads back (poses to 1e-12 mm, deg)."""
+
+    def value(v) -> str:
+        if isinstance(v, str):
+            return f'"{v}"'
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return f"{v:.17g}" if isinstance(v, float) else str(v)
+
+    lines = [f"# {line}" for line in comment.splitlines()] + ["[camera]"]
+    lines += [f"{k} = {value(v)}" for k, v in _setup_keys(setup).items()]
+    moved = "camera" if setup.mode == "eye_to_hand" else "target"
+    for label, other in (sessions or {}).items():
+        keys = _setup_keys(other)
+        lines += ["", f"[camera.sessions.{label}]"]
+        lines += [f"{k} = {value(keys[k])}" for k in (f"{moved}_xyz_mm", f"{moved}_rpy_deg")]
     return "\n".join(lines) + "\n"
 
 
