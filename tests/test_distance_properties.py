@@ -79,7 +79,10 @@ def test_identify_takes_distances_on_the_same_path():
     q = cc.poses.uniform(arm, 30, seed=0)
     true = arm.with_deviations({"a2": 1e-3, "d4": -5e-4, "theta3": 2e-4})
     meas = simulate_distances(true, q, random_pairs(30, 200, seed=1), noise=SIGMA, seed=2)
-    one, two = cc.identify(arm, meas), identify_distances(arm, meas)
+    lines = []
+    one, two = cc.identify(arm, meas, progress=lines.append), identify_distances(arm, meas)
+    # the progress lines count the distances alone: the last RMS is about σ (0.01 mm)
+    assert 0.008 < float(lines[-1].split("RMS ")[1].split(" mm")[0]) < 0.012, lines[-1]
     assert one.measured == "distances" and one.estimated == two.estimated
     assert one.deviations == two.deviations
     with pytest.raises(cc.CalibrationError, match="distance measurements do not take noise"):

@@ -167,6 +167,7 @@ def identify_distances(
     max_iterations: int = 100,
     tolerance: float = 1e-10,
     truth: dict | None = None,
+    progress=None,
 ) -> Calibration:
     """Identify parameter deviations from distances between tool points (see module doc).
 
@@ -189,8 +190,9 @@ def identify_distances(
     if robot.coupling is not None:  # the model alone, in its joints (`casecal.identify`)
         model = dataclasses.replace(measurements, q=robot.model_joints(measurements.q))
         cal = identify_distances(
-            robot.uncoupled(), model, parameters, method, max_iterations, tolerance, truth
-        )
+            robot.uncoupled(), model, parameters, method, max_iterations, tolerance, truth,
+            progress,
+        )  # fmt: skip
         return dataclasses.replace(
             cal,
             nominal=robot,
@@ -223,6 +225,7 @@ def identify_distances(
         tolerance,
         known,
         full.w,
+        progress=progress,
         damped_after_stall=False,
         frames_first=False,
     )

@@ -175,7 +175,7 @@ def identify(
     if isinstance(measurements, DistanceMeasurements):
         _refuse(given, loss, "distance", "their own (DistanceMeasurements.sigma)")
         return identify_distances(
-            robot, measurements, parameters, method, max_iterations, tolerance, truth
+            robot, measurements, parameters, method, max_iterations, tolerance, truth, progress
         )
     if isinstance(measurements, PixelMeasurements):
         _refuse(given, loss, "camera", "the measurements' sigma_px")

@@ -342,7 +342,8 @@ def _solve_round(make, point, names, estimated, settings: Settings, weights, hol
     solver = SOLVERS[settings.method]
     kwargs = {"max_iterations": settings.max_iterations, "tolerance": settings.tolerance}
     if settings.progress is not None:
-        rows = settings.w.size  # cost → RMS per coordinate, in σ (or m) units
+        # cost → RMS per measured coordinate, in σ (or m) units
+        rows = int(np.count_nonzero(make(point, names=names).w_flat))
         # weighted residuals are in σ; back to mm with the RMS σ (1 without σ: in m)
         scale = 1e3 * float(np.sqrt(np.mean(1.0 / measured_weights(settings.w) ** 2)))
 
