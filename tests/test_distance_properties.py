@@ -87,3 +87,13 @@ def test_identify_takes_distances_on_the_same_path():
     assert one.deviations == two.deviations
     with pytest.raises(cc.CalibrationError, match="distance measurements do not take noise"):
         cc.identify(arm, meas, noise=1e-5)
+
+
+def test_a_distance_fit_speaks_of_pairs():
+    """The noise check's words about neighbouring residuals name pairs, not poses."""
+    arm = cc.load_robot("kr15_2")
+    q = cc.poses.uniform(arm, 30, seed=0)
+    true = arm.with_deviations({"a2": 1e-3, "d4": -5e-4, "theta3": 2e-4})
+    meas = simulate_distances(true, q, random_pairs(30, 200, seed=1), noise=SIGMA, seed=2)
+    text = str(identify_distances(arm, meas).summary())
+    assert "neighbouring pairs' residuals" in text and "neighbouring poses'" not in text

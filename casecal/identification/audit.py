@@ -181,6 +181,8 @@ class Facts:
     n_estimated: int = 0
     one_shot: bool = False
     unsupported: tuple[str, ...] = ()
+    items: str = "poses"
+    """What one measurement row group is, in words ("pairs" for distances)."""
     held_gain: float = 0.0
     held: tuple[str, ...] = ()
     smoothness: float | None = None
@@ -380,7 +382,7 @@ def _noise(f: Facts) -> Check:
             )
     if f.smoothness is not None and not at_floor:
         smooth = f.smoothness < SMOOTH
-        text += f"; neighbouring poses' residuals differ {f.smoothness:.2f}× as much as noise's"
+        text += f"; neighbouring {f.items}' residuals differ {f.smoothness:.2f}× as much as noise's"
         if smooth:
             ok = False
             text += (

@@ -282,6 +282,7 @@ def identify_distances(
             n_points=r.size,
             n_estimated=len(fit.estimated),
             smoothness=smoothness(q_pairs, r / w),
+            items="pairs",
             outside_gain=unasked.gain,
             outside_visible=unasked.n_visible,
             outside_leading=unasked.leading,
