@@ -12,6 +12,7 @@ what the lens is (`CameraFit`).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from functools import partial
@@ -326,7 +327,32 @@ def identify_camera(
         unmeasured=got.estimated._unmeasured.reshape(-1, 3),
         camera=camera,
     )
+    mounted = _with_the_mount(cal, measurements.setup.mode)
+    if mounted:
+        cal = dataclasses.replace(cal, start_note=f"{cal.start_note} {mounted}")
     return cal.compare_to(truth) if truth is not None else cal
+
+
+def _with_the_mount(cal: Calibration, mode: str) -> str:
+    """Words for the held parameters the mount on the flange (the board eye-to-hand, the
+    camera eye-in-hand) carries: `Calibration.robot` keeps them nominal, so its flange is
+    off by their deviations, which the views cannot tell from the mount's; "" for none."""
+    terms = {} if cal.representation is None else cal.representation.terms
+    carried = []
+    for name, pairs in terms.items():
+        if name.startswith("tool_"):
+            carried += [held for held, _ in pairs if held not in carried]
+    if not carried:
+        return ""
+    mount = "board" if mode == "eye_to_hand" else "camera"
+    return (
+        f"{', '.join(carried)} stay nominal in the calibrated robot: the views see them only "
+        f"together with the {mount}'s mount on the flange (Calibration.camera.setup's "
+        f"{'target' if mount == 'board' else 'camera'}), which carries their deviations. "
+        f"The robot's flange is right up to them, the mounted {mount} as well as the fit "
+        "predicts: measure a tool's centre point on the calibrated robot, or give these "
+        "parameters' values from elsewhere, before compensating for that tool."
+    )
 
 
 def gross_causes(rms_px: float) -> str:
