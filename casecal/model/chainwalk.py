@@ -93,27 +93,49 @@ def _urdf_joint(T, joint, q_eff, P: dict, trig: dict, cs=None):
     return origin, origin @ joint_motion(jt, axis, angle, cs)
 
 
-def walk_tree(structure, base: ca.SX, q_eff, P: dict, trig: dict, joint_trig=None) -> ca.SX:
-    """The world poses of a tree's tips (`structure.tips`), stacked: (4 · tips) × 4.
+def walk_tree(structure, base: ca.SX, q_eff, P: dict, trig: dict, joint_trig=None, after=None):
+    """A tree walked once: its tips' world poses and, per joint, what `walk` gives.
 
-    Each joint is walked once, from the frame of the joint it hangs from
-    (`structure.parents`; the base for -1), so a path the tips share is one piece of the
-    graph: ``T_joint = T_parent · origin · motion`` and ``T_tip = T_parent · tip frame``.
+    Each joint is walked from the frame of the joint it hangs from (`structure.parents`;
+    the base for -1), so a path the tips share is one piece of the graph: ``T_joint =
+    T_parent · origin · motion [· after]`` and ``T_tip = T_parent · tip frame``.
+
+    Returns
+    -------
+    tips : list of SX, 4 × 4
+        World pose of each tip (`structure.tips`' order).
+    Walk
+        `T` is the base; `axes`, `points`, `bodies` per joint, as `walk`'s.
     """
     from .kinematics import frame_transform, rotation_trig
 
     joint_trig = joint_trig or [None] * len(q_eff)
-    moved: list = []  # per joint, the frame it moves
+    after = after or [None] * len(q_eff)
+    moved, axes, points = [], [], []  # per joint: the frame it moves, its axis, a point
     for i, joint in enumerate(_urdf_rows(structure, q_eff)):
         parent = structure.parents[i]
         T = base if parent < 0 else moved[parent]
-        moved.append(_urdf_joint(T, joint, q_eff, P, trig, joint_trig[i])[1])
+        origin, T = _urdf_joint(T, joint, q_eff, P, trig, joint_trig[i])
+        axes.append(origin[:3, :3] @ ca.DM(joint[2]))
+        points.append(origin[:3, 3])
+        moved.append(T if after[i] is None else T @ after[i])
     tips = []
     for name, parent in structure.tips:
         xyz = [P[f"{name}.{c}"] for c in "xyz"]
         rpy = rotation_trig(trig, [f"{name}.{c}" for c in ("roll", "pitch", "yaw")])
         tips.append((base if parent < 0 else moved[parent]) @ frame_transform(xyz, rpy))
-    return ca.vertcat(*tips)
+    return tips, Walk(base, axes, points, moved)
+
+
+def carried(parents) -> tuple[tuple[int, ...], ...]:
+    """Per joint, the 0-based joints whose bodies it carries (itself and every joint below
+    it), for a tree given by `parents` (each joint's parent index, -1 the base; parents
+    come first). A serial chain's joint i carries i … n-1."""
+    below: list[list[int]] = [[i] for i in range(len(parents))]
+    for i in reversed(range(len(parents))):  # children come after their parents
+        if parents[i] >= 0:
+            below[parents[i]] += below[i]
+    return tuple(tuple(sorted(b)) for b in below)
 
 
 def _urdf_rows(structure, q_eff):

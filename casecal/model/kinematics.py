@@ -425,18 +425,25 @@ class Chain:
 
         base = session_frame("base")
         q_eff = [q[i] for i in range(dof)]
-        if structure.tips:
-            if structure.terms or structure.n_points:
-                raise tree_refusal("error terms and measured points")
-            T = walk_tree(structure, base, q_eff, P, trig, joint_trig)
-            return _Graph(*symbols, T, *joints)
+        tree = bool(structure.tips)
+        if tree and structure.n_points:
+            raise tree_refusal("measured points on a tool")
+
+        def walked(q_eff, after=None, joint_trig=None):
+            """(the graph's output, the Walk, the world poses the terms see as the tool)"""
+            if tree:
+                tips, w = walk_tree(structure, base, q_eff, P, trig, joint_trig, after)
+                return ca.vertcat(*tips), w, None
+            w = walk(structure, base, q_eff, P, trig, after, joint_trig)
+            return w.T @ session_frame("tool"), w, w.T @ session_frame("tool")
+
         if structure.terms:
+            from .chainwalk import carried
             from .terms import STANDARD_GRAVITY, joint_deltas
 
-            rigid = walk(structure, base, q_eff, P, trig)
+            _, rigid, tool = walked(q_eff)
             gravity = base[:3, :3] @ ca.DM(structure.gravity) * STANDARD_GRAVITY
             inputs = {name: q[dof + k] for k, (name, _) in enumerate(structure.inputs)}
-            tool = rigid.T @ session_frame("tool")
             own = {n for t in structure.terms for n in t.parameters}
             deltas, after = joint_deltas(
                 structure.terms,
@@ -447,12 +454,11 @@ class Chain:
                 inputs,
                 tool,
                 known=set(self.names) - own,
+                carried=carried(structure.parents) if tree else (),
             )
             q_eff = [qi + d for qi, d in zip(q_eff, deltas, strict=True)]
-            T = walk(structure, base, q_eff, P, trig, after).T
-            return _Graph(*symbols, T @ session_frame("tool"), *joints)
-        T = walk(structure, base, q_eff, P, trig, joint_trig=joint_trig).T
-        return _Graph(*symbols, T @ session_frame("tool"), *joints)
+            return _Graph(*symbols, walked(q_eff, after)[0], *joints)
+        return _Graph(*symbols, walked(q_eff, joint_trig=joint_trig)[0], *joints)
 
     def extended(self, p: np.ndarray, anchor: np.ndarray | None = None) -> np.ndarray:
         """The graph's input: `p`, cos and sin of its constant angles (pitches and yaws less
@@ -713,8 +719,8 @@ def tree_refusal(what: str) -> CalibrationError:
     """The error for what trees (several tips) do not support yet."""
     return CalibrationError(
         f"{what} are not supported on a kinematic tree (a robot with several tips) yet: "
-        "trees support is geometric for now (forward kinematics, simulate, identify, "
-        "save); use one chain (tip_link= one link) for this"
+        "trees support forward kinematics, error terms (compliance, harmonics), simulate, "
+        "identify and save for now; use one chain (tip_link= one link) for this"
     )
 
 

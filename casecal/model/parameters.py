@@ -387,7 +387,7 @@ def poorly_text(sizes=()) -> str:
     return " or ".join(_size_text(si, unit_facts(si, sizes).poorly) for si in ("m", "rad"))
 
 
-_COMPLIANCE_RE = re.compile(r"^c\d+$")
+_COMPLIANCE_RE = re.compile(r"^c\d+(_[uv])?$")  # torsion c{i}, bending c{i}_u, c{i}_v
 _LUMPED_RE = re.compile(r"^g\d+_\d+([mxyz])$")
 
 

@@ -587,6 +587,7 @@ class Robot:
             values += [v for p in j.passive for v in (*p.xyz, *p.rpy)]
             values += [*j.xyz, *j.rpy] + ([j.offset] if j.type == "R" else [])
         values += [*self.base.xyz, *self.base.rpy]
+        values += [v for t in self.terms for v in t.values]
         return np.array(values + self._session_values(), dtype=float)
 
     @property
@@ -706,25 +707,26 @@ class Robot:
 
     def with_terms(self, *terms) -> Robot:
         """A new Robot with the error terms `terms` (`casecal.model.terms.ErrorTerm`) added."""
-        if terms and self.tip_frames:
-            raise kinematics.tree_refusal("error terms")
         return dataclasses.replace(self, terms=(*self.terms, *terms), auto_beta=False)
 
-    def with_compliance(self, joints=None) -> Robot:
+    def with_compliance(self, joints=None, lateral: bool = False) -> Robot:
         """A new Robot whose revolute joints `joints` (1-based; None: every joint that
-        carries gravity load) deflect by ``c{i}·τ_i`` under gravity (`inertials` needed)."""
+        carries gravity load) turn by ``c{i}·τ_i`` under gravity, τ_i the torque about the
+        joint of every body it carries (on a tree, across branches). Without masses
+        (`inertials`), lumped terms ``g{i}_{k}*`` take their place.
+
+        `lateral`: each joint also bends across its axis, by ``c{i}_u``, ``c{i}_v``
+        (rad/(N·m)) times the gravity moment about two axes perpendicular to it
+        (`casecal.model.elastic`; masses needed).
+        """
         from .terms import compliance_terms
 
-        if self.tip_frames:
-            raise kinematics.tree_refusal("compliance terms")
-        return self.with_terms(*compliance_terms(self, joints))
+        return self.with_terms(*compliance_terms(self, joints, lateral=lateral))
 
     def with_joint_harmonics(self, joint: int, order: int) -> Robot:
         """A new Robot with ``h{joint}_s{k}``, ``h{joint}_c{k}`` (k ≤ `order`) on a joint."""
         from .terms import harmonics
 
-        if self.tip_frames:
-            raise kinematics.tree_refusal("joint harmonics")
         return self.with_terms(harmonics(joint, order))
 
     def with_deviations(self, deviations: Mapping[str, float]) -> Robot:

@@ -55,7 +55,10 @@ class TermContext:
     inputs : dict of str to SX
         The robot's per-pose inputs (`Robot.inputs`), e.g. ``inputs["temperature_c"]``.
     tool : SX, 4 × 4
-        World pose of the tool frame on the rigid chain.
+        World pose of the tool frame on the rigid chain (None on a tree).
+    carried : tuple of tuple of int
+        Per joint, the 0-based joints whose bodies it carries (`beyond`); empty for a
+        serial chain, where joint i carries i … n-1.
     """
 
     q: ca.SX
@@ -66,6 +69,14 @@ class TermContext:
     gravity: ca.SX
     inputs: dict = field(default_factory=dict)
     tool: ca.SX | None = None
+    carried: tuple = ()
+
+    def beyond(self, joint: int) -> tuple[int, ...]:
+        """The 0-based joints whose bodies joint `joint` (1-based) carries: on a tree the
+        joints below it in every branch, on a serial chain those after it."""
+        if self.carried:
+            return self.carried[joint - 1]
+        return tuple(range(joint - 1, len(self.bodies)))
 
 
 @dataclass(frozen=True)
@@ -198,9 +209,10 @@ def _stable(value, depth: int):
     return value
 
 
-def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=()) -> tuple:
+def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=(), carried=()) -> tuple:
     """Per joint, Δ_i (SX, 0 where no term acts) and the transform after its link (SX
-    4 × 4, or None); `known` are the robot's own parameter names."""
+    4 × 4, or None); `known` are the robot's own parameter names, `carried` as
+    `TermContext.carried`."""
     deltas = [ca.SX(0) for _ in range(q.numel())]
     after = [None] * q.numel()
     for term in terms:
@@ -215,7 +227,7 @@ def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=()) -
             return p(name)
 
         ctx = TermContext(
-            q, symbol, walk.axes, walk.points, walk.bodies, gravity, inputs or {}, tool
+            q, symbol, walk.axes, walk.points, walk.bodies, gravity, inputs or {}, tool, carried
         )
         try:
             value = term.build(ctx, term)
@@ -253,7 +265,7 @@ def gravity_torque(ctx: TermContext, joint: int, inertials) -> ca.SX:
     """
     i = joint - 1
     torque = ca.SX(0)
-    for k in range(i, len(ctx.bodies)):
+    for k in ctx.beyond(joint):
         if inertials[k] is None:
             continue
         mass, com = inertials[k]
@@ -312,7 +324,7 @@ def _lumped(ctx: TermContext, term: ErrorTerm) -> ca.SX:
     i = term.joint - 1
     down = ctx.gravity / STANDARD_GRAVITY  # unit vector: the lumped terms carry g
     total = ca.SX(0)
-    for k in range(i, len(ctx.bodies)):
+    for k in ctx.beyond(term.joint):
         body = ctx.bodies[k]
         moment = body[:3, :3] @ ca.vertcat(*(ctx.p(f"g{term.joint}_{k + 1}{a}") for a in "xyz"))
         arm = (body[:3, 3] - ctx.points[i]) * ctx.p(f"g{term.joint}_{k + 1}m")
@@ -320,17 +332,29 @@ def _lumped(ctx: TermContext, term: ErrorTerm) -> ca.SX:
     return total
 
 
-def lumped_compliance(joint: int, n_joints: int) -> ErrorTerm:
+def lumped_compliance(joint: int, n_joints: int, carried=None) -> ErrorTerm:
     """Joint `joint`'s deflection under gravity with masses unknown, linear in lumped terms:
-    per body k beyond it, ``g{joint}_{k}m = c·m_k·g`` (rad/m) and ``g{joint}_{k}x/y/z =
-    c·m_k·g·r_k`` (rad, r_k the centre of mass in body k's frame)."""
-    names = tuple(
-        f"g{joint}_{k}{a}" for k in range(joint, n_joints + 1) for a in ("m", "x", "y", "z")
-    )
+    per body k it carries, ``g{joint}_{k}m = c·m_k·g`` (rad/m) and ``g{joint}_{k}x/y/z =
+    c·m_k·g·r_k`` (rad, r_k the centre of mass in body k's frame). `carried`: the 0-based
+    joints whose bodies it carries (a tree's, `casecal.model.chainwalk.carried`); None for
+    a serial chain's joint, which carries those after it."""
+    bodies = range(joint, n_joints + 1) if carried is None else [k + 1 for k in carried]
+    names = tuple(f"g{joint}_{k}{a}" for k in bodies for a in ("m", "x", "y", "z"))
     return ErrorTerm("lumped_compliance", joint, names, _lumped, (), (n_joints,))
 
 
-BUILT_IN = {"compliance": _compliance, "harmonics": _harmonics, "lumped_compliance": _lumped}
+def _lateral(ctx: TermContext, term: ErrorTerm) -> ca.SX:
+    from .elastic import lateral_turn
+
+    return lateral_turn(ctx, term)
+
+
+BUILT_IN = {
+    "compliance": _compliance,
+    "harmonics": _harmonics,
+    "lumped_compliance": _lumped,
+    "lateral_compliance": _lateral,
+}
 
 
 def check_terms(robot) -> None:
@@ -367,22 +391,29 @@ def refreshed(robot) -> tuple:
     (a robot whose masses were replaced after `with_compliance` must not keep the old)."""
     out = []
     for t in robot.terms:
-        if t.kind == "compliance":
+        if t.kind in ("compliance", "lateral_compliance"):
             if not robot.inertials:
                 raise CalibrationError(
                     f"robot {robot.name!r} has compliance terms but no masses; give its "
                     "inertials, or use lumped terms (with_compliance on a robot without masses)"
                 )
             fresh = compliance(t.joint, robot.inertials, payload_com=robot.payload_com)
+            if t.kind == "lateral_compliance":
+                from .elastic import lateral_terms
+
+                (fresh,) = lateral_terms(robot, [t.joint])
             t = dataclasses.replace(t, data=fresh.data)
         out.append(t)
     return tuple(out)
 
 
-def compliance_terms(robot, joints=None, lumped=None) -> list[ErrorTerm]:
+def compliance_terms(robot, joints=None, lumped=None, lateral=False) -> list[ErrorTerm]:
     """Compliance terms of `robot` on `joints` (None: the revolute joints whose gravity
     torque is not zero at every pose, judged on 64 poses within the limits); lumped terms
-    when the robot has no masses (or `lumped` is True)."""
+    when the robot has no masses (or `lumped` is True); with `lateral`, each joint's
+    bending across its axis too (`casecal.model.elastic`; masses needed)."""
+    from .chainwalk import carried
+
     n = len(robot.joints)
     known = bool(robot.inertials) and any(x is not None for x in robot.inertials)
     known = known if lumped is None else not lumped
@@ -391,12 +422,22 @@ def compliance_terms(robot, joints=None, lumped=None) -> list[ErrorTerm]:
     bad = [j for j in chosen if j not in candidates]
     if bad:
         raise CalibrationError(f"robot {robot.name!r}: joint {bad[0]} is not a revolute joint")
+    below = carried(robot.parents) if robot.tip_frames else [None] * n
     terms = [
         compliance(j, robot.inertials, payload_com=robot.payload_com)
         if known
-        else lumped_compliance(j, n)
+        else lumped_compliance(j, n, below[j - 1])
         for j in chosen
     ]
+    if lateral:
+        if not known:
+            raise CalibrationError(
+                f"robot {robot.name!r}: lateral compliance needs the bodies' masses "
+                "(inertials), not lumped terms: give the masses, or leave lateral out"
+            )
+        from .elastic import lateral_terms
+
+        terms += lateral_terms(robot, chosen)
     if joints is not None:
         return terms
     probe = robot.uncoupled().with_terms(*terms)  # n model joints

@@ -23,9 +23,15 @@ The tree is the union of the paths from the base link (default: the root) to the
 The kinematic graph walks each joint once, from the frame of the joint it hangs from
 (`casecal.model.chainwalk.walk_tree`). ``Robot.position(q)`` is then (N, tips, 3) and
 ``Robot.fk(q)`` (N, tips, 4, 4); measurements of a tree are (N, tips, 3), one point per tip,
-and `casecal.identify` fits them all in one problem. Trees support is geometric for now:
-error terms (compliance, harmonics), measured points on a tip (`Robot.points`),
-orientation measurements, compensation and distance data are refused.
+and `casecal.identify` fits them all in one problem.
+
+**Masses and error terms.** Each joint's body is its child link with everything it carries
+rigidly: the links after it through fixed joints, and branches off the tree (links no
+measured tip lies beyond, a head) at their joints' zero; their URDF ``<inertial>`` masses
+make `Robot.inertials`. Error terms work as on a serial chain, and a joint's gravity torque
+(`Robot.with_compliance`) comes from every body it carries, across branches: the torso
+bends under both arms. Measured points on a tip (`Robot.points`), per-pose inputs (a
+payload), orientation measurements, compensation and distance data are refused for now.
 """
 
 from __future__ import annotations
@@ -90,7 +96,6 @@ def check_tree(robot) -> None:
     refused = [
         what
         for what, present in (
-            ("error terms", robot.terms),
             ("measured points on a tool (points)", robot.points),
             ("per-pose inputs", robot.inputs),
         )
@@ -227,7 +232,9 @@ def read_tree(text: str, label: str, base_link: str | None, tips: list[str]):
         parents.append(s.parent)
         states[j.child] = _State(len(out) - 1, np.eye(4), [])
     frames = [_tip(tip, states[tip], label, base_link) for tip in tips]
+    inertials = _tree_inertials(root, joints, base_link, [j.name for j in out], label)
     return Robot(
+        inertials=inertials,
         name=root.get("name") or _stem(label),
         joints=tuple(out),
         convention="urdf",
@@ -237,6 +244,36 @@ def read_tree(text: str, label: str, base_link: str | None, tips: list[str]):
         source=(label,),
         urdf=UrdfSource(text, base_link, tuple(tips)),
     )
+
+
+def _tree_inertials(root, joints, base_link: str, actuated: list[str], label: str) -> tuple:
+    """Per actuated joint of the tree, the mass (kg) and centre of mass (m, in the frame it
+    moves) of everything it carries rigidly: its child link, the links after it through
+    fixed joints, and the links of branches off the tree (no tip measured there: a head,
+    a second arm left out), taken at their joints' zero; () when no link has a mass.
+    Links moved by a mimic joint count nowhere, as on a serial chain."""
+    from .urdf import _combined, _link_inertials
+
+    masses = _link_inertials(root, label)
+    if not masses:
+        return ()
+    index = {name: k for k, name in enumerate(actuated)}
+    parts: list[list] = [[] for _ in actuated]
+    owner = {base_link: None}  # link -> (joint index, its frame in that joint's moved frame)
+    for j in _depth_first(joints, base_link):
+        above = owner.get(j.parent)
+        if j.name in index:
+            owner[j.child] = (index[j.name], np.eye(4))
+        elif above is None or j.mimic:
+            owner[j.child] = None  # on the base, or moved by a mimic joint
+        else:  # a fixed joint, or a joint off the tree at its zero
+            owner[j.child] = (above[0], above[1] @ j.T)
+        if owner[j.child] is not None and j.child in masses:
+            k, T = owner[j.child]
+            mass, com = masses[j.child]
+            parts[k].append((mass, T[:3, :3] @ com + T[:3, 3]))
+    inertials = tuple(_combined(p) if p else None for p in parts)
+    return inertials if any(x is not None for x in inertials) else ()
 
 
 def _stem(label: str) -> str:
