@@ -412,3 +412,22 @@ def test_one_tip_of_a_random_tree_matches_reference(tmp_path, seed):
     got = np.asarray(compliant.with_deviations(deviations).position(q)).reshape(20, -1, 3)
     want = _reference(tree, names, q, _split(deviations, names))
     assert np.abs(got - want).max() < 1e-10
+
+
+@pytest.mark.xfail(strict=True, reason=SERIAL_DROPS_BRANCHES)
+def test_one_tip_inside_a_chain_carries_what_lies_beyond(tmp_path):
+    """A marker on link3 of a six-joint arm: links 4 and 5 (say, a hand) still weigh on
+    joints 0…3, at their joints' zero."""
+    text, _ = er.random_chain_urdf(np.random.default_rng(5), 6, fixed_every=0)
+    path = tmp_path / "chain.urdf"
+    path.write_text(text)
+    serial = cc.load_robot(path, tip_link="link3")
+    tree = er.parse_urdf(text, ["link3"])
+    names = [j.name for j in serial.joints]
+    assert names == list(tree.moving)
+    every = list(range(1, len(names) + 1))
+    bent = serial.with_compliance(joints=every).with_deviations({f"c{i}": 3e-4 for i in every})
+    q = np.random.default_rng(6).uniform(-2.8, 2.8, (10, len(names)))
+    got = np.asarray(bent.position(q)).reshape(10, -1, 3)
+    want = _reference(tree, names, q, {n: (3e-4, 0.0, 0.0) for n in names})
+    assert np.abs(got - want).max() < 1e-10
