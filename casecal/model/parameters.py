@@ -215,7 +215,7 @@ UNITS = {
     "rad/m": Unit("mrad/m", 1e3, 1e-2, 1e-3, 1e-2),
 }
 
-SIZE_WORDS = {"length": "m", "angle": "rad"}
+SIZE_WORDS = {"length": "m", "angle": "rad", "compliance": "rad/(N·m)"}
 """Words for the SI units of geometry in `casecal.Robot.with_plausible` and robot files."""
 
 

@@ -438,7 +438,11 @@ class Robot:
         return ("base", "tool") if self.sessions[0].tool is not None else ("base",)
 
     def with_plausible(
-        self, length: float | None = None, angle: float | None = None, **by_unit
+        self,
+        length: float | None = None,
+        angle: float | None = None,
+        compliance: float | None = None,
+        **by_unit,
     ) -> Robot:
         """A new Robot with its own sizes of a real deviation (`sizes`), SI.
 
@@ -458,6 +462,10 @@ class Robot:
             ``(plausible, poorly)``. None: unchanged.
         angle : float or (float, float), optional
             The same for angles, rad (ratio 0.2: 2° gives 0.4°).
+        compliance : float or (float, float), optional
+            The same for joint compliances (``c{i}``, ``c{i}_u``, ``c{i}_v``), rad/(N·m);
+            the default 2e-5 suits an industrial arm, a light humanoid's joints give
+            1e-4 to 4e-3.
         **by_unit : float or (float, float)
             Other units by their key in `UNITS`, e.g. ``**{"rad/(N·m)": 1e-4}``.
 
@@ -481,7 +489,7 @@ class Robot:
 
         label = f"robot {self.name!r}"
         given = dict(by_unit)
-        for word, value in (("length", length), ("angle", angle)):
+        for word, value in (("length", length), ("angle", angle), ("compliance", compliance)):
             if value is not None:
                 if SIZE_WORDS[word] in given:
                     raise CalibrationError(

@@ -9,6 +9,9 @@ unit, tool frame); and the tables::
     [compliance]          # c{i} with masses, lumped g{i}_{k}* without; values in SI
     joints = [2, 3]
     c2 = 1.1e-6
+    lateral = [2, 3]      # optional: these joints bend across their axes too (c{i}_u,
+    c2_u = 4e-7           # c{i}_v; casecal.model.elastic; masses needed); true: every
+                          # joint whose bending moment is not always zero
 
     [harmonics]           # h{i}_s{k}, h{i}_c{k} in the file's angle unit
     orders = [[2, 2]]     # [joint, order] pairs
@@ -26,7 +29,7 @@ from ..errors import CalibrationError
 from .terms import compliance_terms, harmonics
 
 TOP_KEYS = {"gravity", "compliance", "harmonics", "inputs", "payload_com", "terms"}
-BUILT_IN_KINDS = {"compliance", "lumped_compliance", "harmonics"}
+BUILT_IN_KINDS = {"compliance", "lumped_compliance", "lateral_compliance", "harmonics"}
 ROW_KEYS = {"mass", "com"}
 
 
@@ -80,11 +83,22 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
         table = _table(data, "compliance", label)
         joints = table.pop("joints", None)
         lumped = table.pop("lumped", None)
+        lateral = table.pop("lateral", False)
         if joints is not None and not (isinstance(joints, list) and joints):
             raise CalibrationError(f"{label}: compliance.joints must be a list of joints")
         if lumped is not None and not isinstance(lumped, bool):
             raise CalibrationError(f"{label}: compliance.lumped must be true or false")
-        terms += compliance_terms(robot, joints, lumped)
+        if not isinstance(lateral, bool) and not (
+            isinstance(lateral, list) and all(isinstance(j, int) for j in lateral)
+        ):
+            raise CalibrationError(
+                f"{label}: compliance.lateral must be true, false or a list of joints"
+            )
+        terms += compliance_terms(robot, joints, lumped, lateral is True)
+        if isinstance(lateral, list) and lateral:
+            from .elastic import lateral_terms
+
+            terms += lateral_terms(robot, _joints(robot, lateral, label))
         values.update({k: number(v, label, f"compliance.{k}") for k, v in table.items()})
     if "harmonics" in data:
         table = _table(data, "harmonics", label)
@@ -104,6 +118,13 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
     if unknown:
         raise CalibrationError(f"{label}: {unknown[0]!r} is not a parameter of these terms")
     return robot.with_parameters(values) if values else robot
+
+
+def _joints(robot, joints: list[int], label: str) -> list[int]:
+    bad = [j for j in joints if not 1 <= j <= len(robot.joints)]
+    if bad:
+        raise CalibrationError(f"{label}: compliance.lateral names joint {bad[0]}, which it lacks")
+    return joints
 
 
 def _table(data: dict, key: str, label: str) -> dict:
@@ -135,9 +156,18 @@ def terms_lines(robot) -> list[str]:
             f"robot {robot.name!r}: compliance with masses and lumped terms together cannot "
             "be saved; keep one kind"
         )
+    lateral = by_kind.get("lateral_compliance", [])
+    if lateral and not by_kind.get("compliance"):
+        raise CalibrationError(
+            f"robot {robot.name!r}: lateral compliance without joint compliance cannot be "
+            "saved; add the joints' compliance (with_compliance(lateral=True))"
+        )
     if comp:
         lumped = "true" if "lumped_compliance" in by_kind else "false"
         lines += ["", "[compliance]", f"joints = {[t.joint for t in comp]}", f"lumped = {lumped}"]
+        if lateral:
+            lines.append(f"lateral = {[t.joint for t in lateral]}")
+        comp = comp + lateral
         lines += [f"{n} = {v!r}" for t in comp for n, v in zip(t.parameters, t.values, strict=True)]
     for block in user:
         lines += block

@@ -232,7 +232,7 @@ def read_tree(text: str, label: str, base_link: str | None, tips: list[str]):
         parents.append(s.parent)
         states[j.child] = _State(len(out) - 1, np.eye(4), [])
     frames = [_tip(tip, states[tip], label, base_link) for tip in tips]
-    inertials = _tree_inertials(root, joints, base_link, [j.name for j in out], label)
+    inertials = body_inertials(root, joints, base_link, [j.name for j in out], label)
     return Robot(
         inertials=inertials,
         name=root.get("name") or _stem(label),
@@ -246,12 +246,13 @@ def read_tree(text: str, label: str, base_link: str | None, tips: list[str]):
     )
 
 
-def _tree_inertials(root, joints, base_link: str, actuated: list[str], label: str) -> tuple:
-    """Per actuated joint of the tree, the mass (kg) and centre of mass (m, in the frame it
-    moves) of everything it carries rigidly: its child link, the links after it through
-    fixed joints, and the links of branches off the tree (no tip measured there: a head,
-    a second arm left out), taken at their joints' zero; () when no link has a mass.
-    Links moved by a mimic joint count nowhere, as on a serial chain."""
+def body_inertials(root, joints, base_link: str, actuated: list[str], label: str) -> tuple:
+    """Per actuated joint `actuated` (names, the robot's order) of a chain or tree, the
+    mass (kg) and centre of mass (m, in the frame it moves) of everything it carries
+    rigidly: its child link, the links after it through fixed joints, and the links of
+    branches no measured tip lies beyond (a head, the other arm, a gripper after the
+    tool frame), taken at their joints' zero; () when no link has a mass. Links moved by
+    a mimic joint count nowhere (their motion is not the actuated joint's)."""
     from .urdf import _combined, _link_inertials
 
     masses = _link_inertials(root, label)

@@ -271,21 +271,13 @@ def read_urdf(text: str, label: str = "URDF", base_link: str | None = None, tip_
     root, joints = parse(text, label)
     links = [el.get("name") for el in root.findall("link")]
     path, base_link, tip_link = chain_path(joints, base_link, tip_link, label, links)
-    masses = _link_inertials(root, label)
-    out, pending, bodies, since = [], np.eye(4), [], np.eye(4)
+    out, pending = [], np.eye(4)
 
     actuated = [j.name for j in path if j.kind in MOVABLE and not j.mimic]
     passive: list[PassiveJoint] = []
-
-    def carry(link: str) -> None:  # the link's mass, in the frame of the body it rides on
-        if bodies and bodies[-1] is not None and link in masses:
-            mass, com = masses[link]
-            bodies[-1].append((mass, since[:3, :3] @ com + since[:3, 3]))
-
     for j in path:
         if j.kind == "fixed":
-            pending, since = pending @ j.T, since @ j.T
-            carry(j.child)
+            pending = pending @ j.T
             continue
         if j.kind not in MOVABLE:
             raise CalibrationError(
@@ -295,17 +287,14 @@ def read_urdf(text: str, label: str = "URDF", base_link: str | None = None, tip_
         # the file's own numbers when no fixed joint folds in: a round trip through the
         # matrix would cost digits
         xyz, rpy = (j.xyz, j.rpy) if np.array_equal(pending, np.eye(4)) else split(pending @ j.T)
-        pending, since = np.eye(4), np.eye(4)
+        pending = np.eye(4)
         if j.mimic:
             passive.append(_passive(j, xyz, rpy, actuated, label))
-            bodies.append(None)  # what a mimic joint moves is left out of gravity torques
             continue
         out.append(
             UrdfJoint(j.name, MOVABLE[j.kind], j.axis, xyz, rpy, 0.0, j.limits, tuple(passive))
         )
         passive = []
-        bodies.append([])
-        carry(j.child)
     if not out:
         raise CalibrationError(f"{label}: no movable joint between {base_link!r} and {tip_link!r}")
     if passive:
@@ -314,9 +303,10 @@ def read_urdf(text: str, label: str = "URDF", base_link: str | None = None, tip_
             "end the chain before it with tip_link= (--tip-link on the command line)"
         )
     tool_xyz, tool_rpy = split(pending)
-    inertials = tuple(_combined(parts) for parts in bodies if parts is not None)
+    from .tree import body_inertials
+
     return Robot(
-        inertials=inertials if any(x is not None for x in inertials) else (),
+        inertials=body_inertials(root, joints, base_link, actuated, label),
         name=root.get("name") or Path(label).stem,
         joints=tuple(out),
         convention="urdf",
