@@ -197,6 +197,26 @@ def test_the_elastic_humanoid_fits_as_well_as_the_published_rigid_model(robot, t
     _check_elastic(rows)
 
 
+def test_joint_and_lateral_compliance_reach_the_floor_on_the_stand_in(tmp_path):
+    """Issue 22: the stand-in's own elasticity (numpy, no casecal) fitted by casecal's
+    joint and lateral compliance on the tree, from the user's CSV: the held-out error
+    falls from the rigid tree's to the noise floor, under the published 3.1 mm."""
+    robot = H.MODELS["joint + lateral"]()
+    q = H.poses(500, seed=21)
+    meas = cc.read_csv(_file(tmp_path, q, H.measure(q, 21)), robot)
+    ((held, _, cal, seconds),) = H.split_study(meas, 1, seed=1, robot=robot)
+    print(
+        f"\njoint + lateral: held-out {held * 1e3:.3f} mm, floor {FLOOR * 1e3:.3f}, {seconds:.0f} s"
+    )
+    assert cal.success, cal.message
+    # 195 parameters from 1500 coordinates: the estimates' spread adds √(1 + 195/1500)
+    assert held < 1.10 * FLOOR < 3.1e-3
+    estimated = [n for n in cal.estimated if n.startswith("c")]
+    assert len(estimated) >= 40  # moved from 0 at humanoid sizes, not held at the start
+    torso = [cal.robot.parameters[f"c{i}"] for i in (2, 3, 4)]  # torso_2 … torso_4
+    assert np.allclose(torso, H.COMPLIANCE["torso"], rtol=0.25), torso
+
+
 @pytest.mark.slow
 def test_every_random_split_of_the_elastic_humanoid(robot, tmp_path):
     rows = _splits(robot, tmp_path, elastic=True, splits=10)

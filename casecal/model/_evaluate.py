@@ -36,6 +36,16 @@ HOT_CALLS = 100
 compiled C: one kernel of every parameter column, its columns taken in numpy, so that the
 many column sets of repeated fits (a study's trials) share one compile per machine."""
 
+COMPILE_MAX_INSTRUCTIONS = 20_000
+"""A one-pose Function longer than this is not compiled for batches under
+`COMPILE_LARGE_BATCH` poses unless its kernel is cached: its C takes minutes to compile
+(2.5 MB of C for the 103,000 instructions of an elastic humanoid's Jacobian: about 3
+minutes of GCC at -O3, more than a whole fit of 250 poses by numpy, 0.17 s per call)."""
+
+COMPILE_LARGE_BATCH = 20_000
+"""Batches of at least this many poses compile even a long Function: numpy's temporaries
+then cost seconds per call."""
+
 PARALLEL_POSES = 8192
 """Batches of at least twice this many poses are split over threads (`thread_map`)."""
 
@@ -89,7 +99,7 @@ class Evaluator:
             thread_map(run, list(range(parts)))
             return out
         vectorised = self._vectorised(n)
-        if vectorised is not None:  # no compiler: numpy over all poses at once
+        if vectorised is not None:  # no compiler, or a long Function: numpy over all poses
             value = vectorised(self.chain.inputs(q, p), p).reshape(n, *self.shape)
         else:
             # CasADi evaluates all N poses in one call when q has N times the expected
@@ -106,6 +116,15 @@ class Evaluator:
         out = np.empty((q.shape[0], *self.shape))
         self._native(q, p, out)
         return out
+
+    def _key(self) -> tuple:
+        return (self.chain.structure.kernel_key, self.kind, self.columns)
+
+    def _not_worth_compiling(self, n: int) -> bool:
+        """A long Function, a batch under `COMPILE_LARGE_BATCH`, no kernel cached."""
+        if n >= COMPILE_LARGE_BATCH or _native.is_cached(self._key()):
+            return False
+        return self.function.n_instructions() > COMPILE_MAX_INSTRUCTIONS
 
     def _vectorised(self, n: int):
         """The numpy evaluator of the instruction list (`_vectorised`) where it serves."""
@@ -126,11 +145,13 @@ class Evaluator:
         backend = backend_choice()
         if backend in ("casadi", "numpy") or (backend == "auto" and n < COMPILE_MIN_POSES):
             return False
+        if not self._native_tried and backend == "auto" and self._not_worth_compiling(n):
+            return False  # numpy for now; a large batch may still compile it
         if not self._native_tried:
             with BUILDING:  # set "tried" only once the kernel (or None) is in place
                 if not self._native_tried:
                     self._native = _native.kernel(
-                        (self.chain.structure.kernel_key, self.kind, self.columns),
+                        self._key(),
                         lambda: self.function,
                         n_q=self.chain.structure.n_inputs,
                         n_p=n_p,

@@ -157,6 +157,20 @@ def fingerprint() -> str:
 _FINGERPRINT: str | None = None
 
 
+def _named(key) -> tuple[str, Path]:
+    """The digest of kernel `key` and where its library is cached."""
+    digest = hashlib.sha256((fingerprint() + repr(key)).encode()).hexdigest()[:24]
+    return digest, cache_dir() / f"casecal_{digest}.so"
+
+
+def is_cached(key) -> bool:
+    """Whether kernel `key`'s library is in the cache (not yet verified: `kernel` does)."""
+    try:
+        return _named(key)[1].is_file()
+    except (OSError, ValueError):  # an unusable cache folder: `kernel` says why
+        return False
+
+
 def kernel(key, build_function, n_q: int, n_p: int, n_out: int, joint_trig=()):
     """A batch callable ``(q (N, n_q), p (n_p,), out) -> None`` in C, or None.
 
@@ -172,8 +186,7 @@ def kernel(key, build_function, n_q: int, n_p: int, n_out: int, joint_trig=()):
     joint_trig : tuple of (int, int)
         Joint angles whose cos and sin the driver computes (`source`).
     """
-    digest = hashlib.sha256((fingerprint() + repr(key)).encode()).hexdigest()[:24]
-    lib_path = cache_dir() / f"casecal_{digest}.so"
+    digest, lib_path = _named(key)
     try:
         lib = _load(lib_path, digest)
         if lib is None:

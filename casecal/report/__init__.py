@@ -18,6 +18,7 @@ from .folder import building_folder, discard, publish
 from .pose_count import pose_count_sweep
 from .studies_beyond import enough_poses, optimal_poses, relative_measurements
 from .studies_compliance import compliance_study
+from .studies_elastic import elastic_study
 from .studies_paper import planar_arms, scara_observability, table1
 from .studies_sweeps import noise_sweep, six_axis
 
@@ -32,6 +33,7 @@ STUDIES: dict[str, Callable] = {
     "calibrate_until": enough_poses,
     "relative": relative_measurements,
     "compliance": compliance_study,
+    "elastic": elastic_study,
 }
 NAMES = {
     "table1": "the paper's Table 1",
@@ -44,6 +46,7 @@ NAMES = {
     "calibrate_until": "calibrate until a target",
     "relative": "relative measurements",
     "compliance": "compliance under gravity",
+    "elastic": "an elastic humanoid tree",
 }
 """Each study in words, as ``casecal report --help`` and the title page name them."""
 PDF_TABLES = {"table1", "scara_blind_spots", "six_axis_observability"}
@@ -54,6 +57,8 @@ OUTPUTS = frozenset(
         "calibrate_until_runs.csv",
         "compliance.png",
         "compliance_trials.csv",
+        "elastic.png",
+        "elastic_trials.csv",
         "noise_sweep.png",
         "noise_trials.csv",
         "optimal_poses.png",
