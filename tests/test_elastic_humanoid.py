@@ -33,6 +33,9 @@ _spec.loader.exec_module(H)
 
 SIGMA = 0.5e-3  # m per axis
 FLOOR = SIGMA * math.sqrt(8 / math.pi)  # mean length of a 3-D Gaussian error
+# at the floor: 195 parameters from 1500 coordinates add √(1 + 195/1500) = 1.06 to the
+# noise's, and a mean of 500 distances varies by 0.42 / √500 = 1.9 % of it: 1.06 + 3 · 0.019
+HELD_OUT = 1.12
 
 
 @pytest.fixture(scope="module")
@@ -83,12 +86,15 @@ def test_joint_and_lateral_compliance_take_the_humanoid_to_the_noise_floor(nomin
     cal, held_out, train = fit(nominal, seed=3)
     assert cal.success, cal.message
     z = z_scores(cal)
-    worst = max(z, key=lambda n: abs(z[n]))
-    assert abs(z[worst]) < 4.5, (worst, z[worst])
     compliances = [n for n in cal.estimated if n.startswith("c")]
     assert len(compliances) >= 40  # the fit moved them from 0: they are estimated
-    # 195 parameters from 1500 coordinates: the estimates' own spread adds √(1 + 195/1500)
-    assert held_out < FLOOR * 1.10, (held_out * 1e3, FLOOR * 1e3)
+    assert max(abs(z[n]) for n in compliances) < 4.0, {n: z[n] for n in compliances}
+    # the geometry's combinations are compared to the truth linearly: with 5 mm and 0.7°
+    # on every origin their second-order terms reach a few standard errors (6 on one
+    # parameter in 8 trials); more than 6 would be an estimate off its truth
+    worst = max(z, key=lambda n: abs(z[n]))
+    assert abs(z[worst]) < 6.0, (worst, z[worst])
+    assert held_out < FLOOR * HELD_OUT, (held_out * 1e3, FLOOR * 1e3)
     # the rigid tree of the same data stays far from it
     rigid = cc.identify(H.user_robot(), train, "all")
     miss = rigid.robot.position(train.q) - train.positions
@@ -110,4 +116,4 @@ def test_the_compliances_come_back_within_their_standard_errors_monte_carlo(nomi
     z_all = np.array(z_all)
     assert abs(z_all.mean()) < 4 / math.sqrt(len(z_all)) * 1.5, z_all.mean()
     assert 0.75 < z_all.std() < 1.3, z_all.std()
-    assert max(held) < FLOOR * 1.10, np.array(held) * 1e3
+    assert max(held) < FLOOR * HELD_OUT, np.array(held) * 1e3

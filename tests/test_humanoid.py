@@ -209,8 +209,9 @@ def test_joint_and_lateral_compliance_reach_the_floor_on_the_stand_in(tmp_path):
         f"\njoint + lateral: held-out {held * 1e3:.3f} mm, floor {FLOOR * 1e3:.3f}, {seconds:.0f} s"
     )
     assert cal.success, cal.message
-    # 195 parameters from 1500 coordinates: the estimates' spread adds √(1 + 195/1500)
-    assert held < 1.10 * FLOOR < 3.1e-3
+    # 195 parameters from 1500 coordinates add √(1 + 195/1500) = 1.06 to the noise's, and
+    # a mean of 500 distances varies by 0.42 / √500 = 1.9 % of it: 1.06 + 3 · 0.019
+    assert held < 1.12 * FLOOR < 3.1e-3
     estimated = [n for n in cal.estimated if n.startswith("c")]
     assert len(estimated) >= 40  # moved from 0 at humanoid sizes, not held at the start
     torso = [cal.robot.parameters[f"c{i}"] for i in (2, 3, 4)]  # torso_2 … torso_4

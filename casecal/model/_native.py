@@ -147,7 +147,7 @@ def fingerprint() -> str:
         # parameters.py fixes the layout of p: a change there must not reuse old kernels
         files = ("kinematics.py", "chainwalk.py", "terms.py", "_native.py", "_trig.py")
         files += ("parameters.py", "rotation_chart.py")  # which angles are anchored
-        files += ("elastic.py",)  # the lateral compliance term's function
+        files += ("elastic.py", "masses.py")  # what the gravity terms' functions call
         text = "".join((here / f).read_text() for f in files)
         text += ca.__version__ + " ".join(CFLAGS)
         _FINGERPRINT = hashlib.sha256(text.encode()).hexdigest()

@@ -33,14 +33,17 @@ def gravity_moment(ctx: TermContext, joint: int, inertials, payload_com=None) ->
 
     `inertials` as for `casecal.model.terms.gravity_torque`; `payload_com` (m, tool
     frame) where the robot reads a payload mass (`casecal.model.terms.PAYLOAD`)."""
+    from .masses import body_mass
+
     i = joint - 1
     moment = ca.SX.zeros(3)
     for k in ctx.beyond(joint):
-        if inertials[k] is None:
+        inertial = body_mass(ctx, k, inertials)
+        if inertial is None:
             continue
-        mass, com = inertials[k]
+        mass, com = inertial
         body = ctx.bodies[k]
-        centre = body[:3, :3] @ ca.DM(com) + body[:3, 3]
+        centre = body[:3, :3] @ com + body[:3, 3]
         moment = moment + ca.cross(centre - ctx.points[i], mass * ctx.gravity)
     if payload_com is not None and PAYLOAD in ctx.inputs and ctx.tool is not None:
         centre = ctx.tool[:3, :3] @ ca.DM(payload_com) + ctx.tool[:3, 3]

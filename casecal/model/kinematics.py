@@ -444,7 +444,6 @@ class Chain:
             _, rigid, tool = walked(q_eff)
             gravity = base[:3, :3] @ ca.DM(structure.gravity) * STANDARD_GRAVITY
             inputs = {name: q[dof + k] for k, (name, _) in enumerate(structure.inputs)}
-            own = {n for t in structure.terms for n in t.parameters}
             deltas, after = joint_deltas(
                 structure.terms,
                 rigid,
@@ -453,7 +452,7 @@ class Chain:
                 gravity,
                 inputs,
                 tool,
-                known=set(self.names) - own,
+                known=set(self.names),  # a term may read another's (masses)
                 carried=carried(structure.parents) if tree else (),
             )
             q_eff = [qi + d for qi, d in zip(q_eff, deltas, strict=True)]

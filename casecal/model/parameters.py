@@ -213,6 +213,9 @@ UNITS = {
     "rad/(N·m)": Unit("µrad/(N·m)", 1e6, 2e-5, 5e-7, 2e-5),
     # a lumped gravity term: compliance times a weight (1e-6 rad/(N·m) · 1e3 N)
     "rad/m": Unit("mrad/m", 1e3, 1e-2, 1e-3, 1e-2),
+    # a body's mass as a parameter (casecal.model.masses): a CAD off by kilograms; a
+    # robot whose bodies are much heavier or lighter gives its own (with_plausible)
+    "kg": Unit("kg", 1.0, 5.0, 1.0, 1.0),
 }
 
 SIZE_WORDS = {"length": "m", "angle": "rad", "compliance": "rad/(N·m)"}
@@ -389,12 +392,13 @@ def poorly_text(sizes=()) -> str:
 
 _COMPLIANCE_RE = re.compile(r"^c\d+(_[uv])?$")  # torsion c{i}, bending c{i}_u, c{i}_v
 _LUMPED_RE = re.compile(r"^g\d+_\d+([mxyz])$")
+_MASS_RE = re.compile(r"^m\d+$")  # a body's mass (casecal.model.masses)
 
 
 def is_length(name: str) -> bool:
     """True for parameters measured in metres, False for those in radians (and the
     compliance terms' own units, `unit`)."""
-    if _COMPLIANCE_RE.match(name) or _LUMPED_RE.match(name):
+    if _COMPLIANCE_RE.match(name) or _LUMPED_RE.match(name) or _MASS_RE.match(name):
         return False
     name = plain_name(name)
     if "." in name:  # a URDF joint's origin: {joint}.x … {joint}.offset
@@ -429,6 +433,8 @@ def unit(name: str) -> str:
         return _DECLARED[name]
     if _COMPLIANCE_RE.match(name):
         return "rad/(N·m)"
+    if _MASS_RE.match(name):
+        return "kg"
     lumped = _LUMPED_RE.match(name)
     if lumped:
         return "rad/m" if lumped.group(1) == "m" else "rad"

@@ -731,6 +731,15 @@ class Robot:
 
         return self.with_terms(*compliance_terms(self, joints, lateral=lateral))
 
+    def with_masses(self, joints=None) -> Robot:
+        """A new Robot whose bodies' masses (``m{k}``, kg) and centres of mass
+        (``m{k}_x/y/z``, m, in the frame joint k moves) are parameters, starting at its
+        `inertials`, for compliance terms to read (`casecal.model.masses`); `joints`:
+        the bodies (1-based; None: every body with a mass)."""
+        from .masses import mass_terms
+
+        return self.with_terms(*mass_terms(self, joints))
+
     def with_joint_harmonics(self, joint: int, order: int) -> Robot:
         """A new Robot with ``h{joint}_s{k}``, ``h{joint}_c{k}`` (k ≤ `order`) on a joint."""
         from .terms import harmonics

@@ -59,6 +59,9 @@ class TermContext:
     carried : tuple of tuple of int
         Per joint, the 0-based joints whose bodies it carries (`beyond`); empty for a
         serial chain, where joint i carries i … n-1.
+    names : frozenset of str
+        Every parameter of the robot (a term may read any, e.g. the masses of
+        `casecal.model.masses`).
     """
 
     q: ca.SX
@@ -70,6 +73,7 @@ class TermContext:
     inputs: dict = field(default_factory=dict)
     tool: ca.SX | None = None
     carried: tuple = ()
+    names: frozenset = frozenset()
 
     def beyond(self, joint: int) -> tuple[int, ...]:
         """The 0-based joints whose bodies joint `joint` (1-based) carries: on a tree the
@@ -227,7 +231,16 @@ def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=(), c
             return p(name)
 
         ctx = TermContext(
-            q, symbol, walk.axes, walk.points, walk.bodies, gravity, inputs or {}, tool, carried
+            q,
+            symbol,
+            walk.axes,
+            walk.points,
+            walk.bodies,
+            gravity,
+            inputs or {},
+            tool,
+            carried,
+            frozenset(known) | frozenset(term.parameters),
         )
         try:
             value = term.build(ctx, term)
@@ -261,16 +274,20 @@ def gravity_torque(ctx: TermContext, joint: int, inertials) -> ca.SX:
     """Gravity's torque about joint `joint` (1-based) of the bodies beyond it, N·m.
 
     `inertials` holds per joint (mass kg, centre of mass xyz m in the body's frame), or
-    None for a body without mass.
+    None for a body without mass; the robot's mass parameters take their place where it
+    has them (`casecal.model.masses`).
     """
+    from .masses import body_mass
+
     i = joint - 1
     torque = ca.SX(0)
     for k in ctx.beyond(joint):
-        if inertials[k] is None:
+        inertial = body_mass(ctx, k, inertials)
+        if inertial is None:
             continue
-        mass, com = inertials[k]
+        mass, com = inertial
         body = ctx.bodies[k]
-        centre = body[:3, :3] @ ca.DM(com) + body[:3, 3]
+        centre = body[:3, :3] @ com + body[:3, 3]
         torque = torque + ca.dot(ca.cross(centre - ctx.points[i], mass * ctx.gravity), ctx.axes[i])
     return torque
 

@@ -13,6 +13,10 @@ unit, tool frame); and the tables::
     c2_u = 4e-7           # c{i}_v; casecal.model.elastic; masses needed); true: every
                           # joint whose bending moment is not always zero
 
+    [masses]              # bodies whose mass and centre of mass are parameters
+    joints = [6]          # (casecal.model.masses): m{i} kg, m{i}_x/y/z in SI
+    m6 = 12.5
+
     [harmonics]           # h{i}_s{k}, h{i}_c{k} in the file's angle unit
     orders = [[2, 2]]     # [joint, order] pairs
     h2_s1 = 0.002
@@ -28,8 +32,8 @@ import numpy as np
 from ..errors import CalibrationError
 from .terms import compliance_terms, harmonics
 
-TOP_KEYS = {"gravity", "compliance", "harmonics", "inputs", "payload_com", "terms"}
-BUILT_IN_KINDS = {"compliance", "lumped_compliance", "lateral_compliance", "harmonics"}
+TOP_KEYS = {"gravity", "compliance", "harmonics", "masses", "inputs", "payload_com", "terms"}
+BUILT_IN_KINDS = {"compliance", "lumped_compliance", "lateral_compliance", "harmonics", "mass"}
 ROW_KEYS = {"mass", "com"}
 
 
@@ -100,6 +104,15 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
 
             terms += lateral_terms(robot, _joints(robot, lateral, label))
         values.update({k: number(v, label, f"compliance.{k}") for k, v in table.items()})
+    if "masses" in data:
+        from .masses import mass_terms
+
+        table = _table(data, "masses", label)
+        joints = table.pop("joints", None)
+        if not (isinstance(joints, list) and joints and all(isinstance(j, int) for j in joints)):
+            raise CalibrationError(f"{label}: masses.joints must be a list of joints")
+        terms += mass_terms(robot, joints)
+        values.update({k: number(v, label, f"masses.{k}") for k, v in table.items()})
     if "harmonics" in data:
         table = _table(data, "harmonics", label)
         orders = table.pop("orders", None)
@@ -169,6 +182,12 @@ def terms_lines(robot) -> list[str]:
             lines.append(f"lateral = {[t.joint for t in lateral]}")
         comp = comp + lateral
         lines += [f"{n} = {v!r}" for t in comp for n, v in zip(t.parameters, t.values, strict=True)]
+    if "mass" in by_kind:
+        terms = by_kind["mass"]
+        lines += ["", "[masses]", f"joints = {[t.joint for t in terms]}"]
+        lines += [
+            f"{n} = {v!r}" for t in terms for n, v in zip(t.parameters, t.values, strict=True)
+        ]
     for block in user:
         lines += block
     if "harmonics" in by_kind:

@@ -35,10 +35,10 @@ FLOOR = SIGMA * math.sqrt(8 / math.pi)
 perfect model."""
 COMPLIANCE = {"torso": 8e-5, "arm": 2.5e-4}
 """Joint compliance about the axis, rad/(N·m), of the torso's joints and the arms'."""
-BENDING = {"torso": (4e-5, 2.5e-5), "arm": (1.1e-4, 7.5e-5)}
+BENDING = {"torso": (3.4e-5, 2.1e-5), "arm": (9.5e-5, 6.5e-5)}
 """Lateral compliance, rad/(N·m), about the two axes of a joint's child frame across its
 axis (`casecal.model.elastic`); sized so that the rigid tree misses by about the
-published rigid model's 10 mm."""
+published rigid model's 10 mm (at 1.18 times these it missed by 10.6 mm on 10 splits)."""
 PUBLISHED_MM = {"rigid": 10.5, "joint": 5.6, "joint + lateral": 3.1}
 """Agile Justin's published mean held-out errors, mm."""
 MODELS = {
@@ -121,7 +121,7 @@ def _trial(task) -> list[dict]:
 def elastic_study(out: Path, quick: bool = False, run=None) -> StudyResult:
     """Held-out error against pose count: rigid tree, joint, joint + lateral compliance."""
     res = StudyResult("elastic", "An elastic humanoid: joint and lateral compliance on a tree")
-    counts = (250,) if quick else (150, 250, 400)
+    counts = (250,) if quick else (125, 250)
     tasks = [(n, 0) for n in counts]
     if run is None:
         from ..studies.executor import Executor
