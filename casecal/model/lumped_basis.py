@@ -45,7 +45,8 @@ ZERO = 1e-9
 """A column below this fraction of the joint's largest is zero (a centre of mass on the
 joint's own axis): rounding, not a direction."""
 
-_NAME = re.compile(r"^g(\d+)_(\d+)([mxyz])$")
+NAME = re.compile(r"^g(\d+)_(\d+)([mxyz])$")
+"""A lumped term's name: joint, body, and m or an axis."""
 
 
 def _lumped_subset(ctx, term: ErrorTerm) -> ca.SX:
@@ -92,7 +93,7 @@ def lumped_subset(joint: int, n_joints: int, names, values=()) -> ErrorTerm:
     if not names:
         raise CalibrationError(f"lumped terms of joint {joint}: give at least one name")
     for name in names:
-        match = _NAME.match(name)
+        match = NAME.match(name)
         if not match or int(match[1]) != joint or not joint <= int(match[2]) <= n_joints:
             raise CalibrationError(
                 f"{name!r} is not a lumped gravity term of joint {joint} on a robot of "

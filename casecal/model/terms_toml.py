@@ -10,6 +10,11 @@ unit, tool frame); and the tables::
     joints = [2, 3]
     c2 = 1.1e-6
 
+    [compliance]          # or some lumped terms only (casecal.model.lumped_basis)
+    joints = [2, 3]
+    lumped = ["g2_2m", "g3_3z"]
+    g2_2m = 1.2e-5
+
     [harmonics]           # h{i}_s{k}, h{i}_c{k} in the file's angle unit
     orders = [[2, 2]]     # [joint, order] pairs
     h2_s1 = 0.002
@@ -26,7 +31,7 @@ from ..errors import CalibrationError
 from .terms import compliance_terms, harmonics
 
 TOP_KEYS = {"gravity", "compliance", "harmonics", "inputs", "payload_com", "terms"}
-BUILT_IN_KINDS = {"compliance", "lumped_compliance", "harmonics"}
+BUILT_IN_KINDS = {"compliance", "lumped_compliance", "lumped_compliance_subset", "harmonics"}
 ROW_KEYS = {"mass", "com"}
 
 
@@ -82,9 +87,14 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
         lumped = table.pop("lumped", None)
         if joints is not None and not (isinstance(joints, list) and joints):
             raise CalibrationError(f"{label}: compliance.joints must be a list of joints")
-        if lumped is not None and not isinstance(lumped, bool):
-            raise CalibrationError(f"{label}: compliance.lumped must be true or false")
-        terms += compliance_terms(robot, joints, lumped)
+        if isinstance(lumped, list):
+            terms += _lumped_subsets(robot, joints, lumped, label)
+        elif lumped is not None and not isinstance(lumped, bool):
+            raise CalibrationError(
+                f"{label}: compliance.lumped must be true, false or a list of lumped terms"
+            )
+        else:
+            terms += compliance_terms(robot, joints, lumped)
         values.update({k: number(v, label, f"compliance.{k}") for k, v in table.items()})
     if "harmonics" in data:
         table = _table(data, "harmonics", label)
@@ -104,6 +114,32 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
     if unknown:
         raise CalibrationError(f"{label}: {unknown[0]!r} is not a parameter of these terms")
     return robot.with_parameters(values) if values else robot
+
+
+def _lumped_subsets(robot, joints, names: list, label: str) -> list:
+    """The lumped terms `names` (``g{j}_{k}m/x/y/z``) of `joints` (default: the joints
+    they name), one term per joint."""
+    from .lumped_basis import NAME, lumped_subset
+
+    parsed = [NAME.match(n) if isinstance(n, str) else None for n in names]
+    if not names or not all(parsed):
+        raise CalibrationError(
+            f"{label}: compliance.lumped must be true, false or a list of lumped terms by "
+            'name (g<joint>_<body><m|x|y|z>), e.g. ["g2_2m", "g3_3z"]'
+        )
+    named = [int(m[1]) for m in parsed]
+    joints = sorted(set(named)) if joints is None else [int(j) for j in joints]
+    stray = [n for n, j in zip(names, named, strict=True) if j not in joints]
+    if stray:
+        raise CalibrationError(
+            f"{label}: compliance.lumped names {stray[0]!r}, a term of a joint not in "
+            f"compliance.joints {joints}; add the joint or remove the term"
+        )
+    by_joint = {j: [n for n, i in zip(names, named, strict=True) if i == j] for j in joints}
+    try:
+        return [lumped_subset(j, len(robot.joints), v) for j, v in by_joint.items() if v]
+    except CalibrationError as exc:
+        raise CalibrationError(f"{label}: compliance.lumped: {exc}") from None
 
 
 def _table(data: dict, key: str, label: str) -> dict:
@@ -129,14 +165,19 @@ def terms_lines(robot) -> list[str]:
         by_kind.setdefault(t.kind, []).append(t)
     other = [t for t in robot.terms if t.kind not in BUILT_IN_KINDS]
     user = [_user_lines(robot, t) for t in other]
-    comp = by_kind.get("compliance", []) + by_kind.get("lumped_compliance", [])
-    if by_kind.get("compliance") and by_kind.get("lumped_compliance"):
+    lumped_terms = by_kind.get("lumped_compliance", []) + by_kind.get(
+        "lumped_compliance_subset", []
+    )
+    comp = by_kind.get("compliance", []) + lumped_terms
+    if by_kind.get("compliance") and lumped_terms:
         raise CalibrationError(
             f"robot {robot.name!r}: compliance with masses and lumped terms together cannot "
             "be saved; keep one kind"
         )
     if comp:
-        lumped = "true" if "lumped_compliance" in by_kind else "false"
+        lumped = "true" if lumped_terms else "false"
+        if "lumped_compliance_subset" in by_kind:  # some terms only: name them
+            lumped = "[" + ", ".join(f'"{n}"' for t in comp for n in t.parameters) + "]"
         lines += ["", "[compliance]", f"joints = {[t.joint for t in comp]}", f"lumped = {lumped}"]
         lines += [f"{n} = {v!r}" for t in comp for n, v in zip(t.parameters, t.values, strict=True)]
     for block in user:
