@@ -192,3 +192,15 @@ def test_over_six_arms_the_chosen_terms_predict_better_than_all():
         assert reduced < held_out_rms(rigid().with_compliance(), meas, held), seed
         ratios.append(reduced / noise_floor(true, meas))
     assert np.median(ratios) <= 1.10, ratios
+
+
+def test_the_command_line_offers_the_terms_that_predict(forty_poses, tmp_path, capsys):
+    from casecal.cli import main
+
+    _, meas, _ = forty_poses
+    cc.save_robot(rigid(), tmp_path / "rx90.toml")  # no masses: lumped terms
+    cc.write_csv(tmp_path / "m.csv", meas, rigid())
+    argv = ["compare", str(tmp_path / "rx90.toml"), str(tmp_path / "m.csv"), "--compliance"]
+    assert main([*argv, "--folds", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "chosen by cross-validation: + compliance, terms that predict" in out
