@@ -156,6 +156,10 @@ def test_a_robot_with_compliance_terms_is_refused():
         select_lumped(rigid().with_compliance(), meas)
     with pytest.raises(cc.CalibrationError, match="not a lumped gravity term of joint 2"):
         lumped_subset(2, 6, ["g3_3m"])
+    scara = cc.load_robot("scara")  # vertical axes: gravity loads none of them
+    flat = cc.simulate(scara, cc.poses.uniform(scara, 10, seed=1), noise=SIGMA, seed=1)
+    with pytest.raises(cc.CalibrationError, match="no joint carries gravity load"):
+        select_lumped(scara, flat)
 
 
 def test_a_chosen_set_survives_the_robot_file(tmp_path):

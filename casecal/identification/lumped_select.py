@@ -112,6 +112,11 @@ def select_lumped(
     """
     _check(robot, measurements, folds)
     candidates = reduced_lumped_terms(robot, joints)
+    if not candidates:
+        raise CalibrationError(
+            f"robot {robot.name!r}: no joint carries gravity load (its axes are vertical "
+            "or nothing beyond them has a lever): there are no lumped terms to choose"
+        )
     names = [n for t in candidates for n in t.parameters]
     kwargs = {} if method is None else {"method": method}
     cal = identify(robot, measurements, parameters, **kwargs)
@@ -138,6 +143,10 @@ def _check(robot, measurements, folds: int) -> None:
         raise CalibrationError(
             f"robot {robot.name!r} already has compliance terms; give the robot without "
             "them, and the lumped terms are chosen from all of its joints"
+        )
+    if getattr(measurements, "positions", None) is None or not hasattr(measurements, "session"):
+        raise CalibrationError(
+            "choosing lumped terms needs measured positions (Measurements), not distances or pixels"
         )
     if measurements.session is not None or getattr(measurements, "contact", None):
         raise CalibrationError(
