@@ -4,9 +4,13 @@ what the full set spans (the "base parameters" of the lumped compliance).
 Joint j's lumped deflection (`casecal.model.terms.lumped_compliance`) is linear in 4 terms
 per body beyond it, ``Δ_j(q) = Σ_i g_i · φ_i(q)``, but its regressor columns φ_i are not
 independent: the torque about joint j is a trigonometric polynomial in the joints beyond
-it, and many lumped terms enter it only in fixed combinations (a centre of mass along a
-joint's axis has no lever about it; two bodies joined by a joint parallel to gravity's
-lever enter through their sum). Only the span of the φ_i can be determined by any data,
+it, and the lumped terms enter it only through fewer combinations, as a robot's masses
+enter its gravity torques only through the base parameters of its dynamics (Khalil and
+Dombre, *Modeling, Identification and Control of Robots*, 2002, ch. 12; e.g. a body's
+mass at a point fixed in the body before it acts as that body's first moment, and a
+first moment along the joint's own axis has no lever about it). On the catalog arms
+tried (`REDUNDANT`) half are independent: 10 of 20 for joint 2, 8 of 16 for joint 3, 6 of
+12 and 4 of 8 for joints 4 and 5. Only the span of the φ_i can be determined by any data,
 so a term whose column is a combination of the others' is dropped: the model is the same
 function of the joints, with fewer names, and the fit of the kept set equals the full
 set's on any data.
