@@ -23,7 +23,8 @@ def add_command(command) -> None:
         "--compliance",
         action="store_true",
         help="add gravity compliance on every loaded joint (c_i with masses in the robot "
-        "file, lumped terms without)",
+        "file, lumped terms without; then also the lumped terms that predict, chosen again "
+        "in each fold)",
     )
     p.add_argument(
         "--harmonics",
@@ -41,6 +42,7 @@ def run(args: argparse.Namespace) -> None:
     from .data.files import read_csv
     from .errors import CalibrationError
     from .identification.compare import compare_models
+    from .identification.lumped_select import ReducedLumped
 
     robot = cli.robot_for(args, args.robot)
     rigid = dataclasses.replace(robot, terms=(), auto_beta=False)
@@ -59,4 +61,11 @@ def run(args: argparse.Namespace) -> None:
     if len(models) == 1:
         raise CalibrationError("nothing to compare: add --compliance and/or --harmonics J:K")
     meas = read_csv(args.measurements, robot)
+    lumped = any(t.kind == "lumped_compliance" for t in models.get("+ compliance", rigid).terms)
+    if lumped and meas.session is None and not getattr(meas, "contact", None):
+        # the lumped terms that predict, beside all of them (chosen again in each fold)
+        names = list(models)
+        at = names.index("+ compliance") + 1
+        extra = {"+ compliance, terms that predict": ReducedLumped(rigid)}
+        models = {n: models[n] for n in names[:at]} | extra | {n: models[n] for n in names[at:]}
     print(compare_models(models, meas, folds=args.folds))

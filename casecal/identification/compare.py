@@ -53,6 +53,20 @@ def _points(cal, meas) -> np.ndarray:
     return out
 
 
+def _nominal(model, measurements):
+    """The robot of `model`: itself, or built from `measurements` when it is a builder."""
+    from ..model.robot import Robot
+
+    if isinstance(model, Robot):
+        return model
+    if not callable(model):
+        raise CalibrationError(
+            f"compare_models takes robots or functions of the measurements that return "
+            f"one, not {type(model).__name__}"
+        )
+    return model(measurements)
+
+
 def _criteria(cal, meas, n_estimated: int) -> tuple[float, float]:
     """AIC and BIC of a fit: from χ² with a stated σ, else from the residual sum of squares."""
     r = cal.residuals.reshape(meas.n_poses, -1)
@@ -77,8 +91,12 @@ def compare_models(
 
     Parameters
     ----------
-    models : mapping of str to Robot
-        Usually nested: the rigid robot, then with compliance, then with harmonics.
+    models : mapping of str to Robot or callable
+        Usually nested: the rigid robot, then with compliance, then with harmonics. A
+        callable ``model(measurements) -> Robot`` builds its robot from the poses it is
+        fitted to, once on all of them and again on each fold's training poses, so that
+        a choice it makes from the data (`casecal.identification.lumped_select.
+        ReducedLumped`: the lumped gravity terms that predict) is cross-validated too.
     measurements : Measurements
     parameters : str or list
         As for `identify`, for every model ("all": each model's own full set).
@@ -104,13 +122,13 @@ def compare_models(
     fold = np.random.default_rng(seed).permutation(n) % folds
     kwargs = {} if method is None else {"method": method}
     rows = []
-    for name, robot in models.items():
-        cal = identify(robot, measurements, parameters, **kwargs)
+    for name, model in models.items():
+        cal = identify(_nominal(model, measurements), measurements, parameters, **kwargs)
         errors = []
         for k in range(folds):
             train, test = measurements.take(fold != k), measurements.take(fold == k)
             try:
-                part = identify(robot, train, parameters, **kwargs)
+                part = identify(_nominal(model, train), train, parameters, **kwargs)
             except CalibrationError as exc:
                 raise CalibrationError(
                     f"model {name!r}, cross-validation fold {k + 1} of {folds} "

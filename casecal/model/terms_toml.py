@@ -17,6 +17,11 @@ unit, tool frame); and the tables::
     joints = [6]          # (casecal.model.masses): m{i} kg, m{i}_x/y/z in SI
     m6 = 12.5
 
+    [compliance]          # or some lumped terms only (casecal.model.lumped_basis)
+    joints = [2, 3]
+    lumped = ["g2_2m", "g3_3z"]
+    g2_2m = 1.2e-5
+
     [harmonics]           # h{i}_s{k}, h{i}_c{k} in the file's angle unit
     orders = [[2, 2]]     # [joint, order] pairs
     h2_s1 = 0.002
@@ -33,7 +38,14 @@ from ..errors import CalibrationError
 from .terms import compliance_terms, harmonics
 
 TOP_KEYS = {"gravity", "compliance", "harmonics", "masses", "inputs", "payload_com", "terms"}
-BUILT_IN_KINDS = {"compliance", "lumped_compliance", "lateral_compliance", "harmonics", "mass"}
+BUILT_IN_KINDS = {
+    "compliance",
+    "lumped_compliance",
+    "lumped_compliance_subset",
+    "lateral_compliance",
+    "harmonics",
+    "mass",
+}
 ROW_KEYS = {"mass", "com"}
 
 
@@ -90,15 +102,20 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
         lateral = table.pop("lateral", False)
         if joints is not None and not (isinstance(joints, list) and joints):
             raise CalibrationError(f"{label}: compliance.joints must be a list of joints")
-        if lumped is not None and not isinstance(lumped, bool):
-            raise CalibrationError(f"{label}: compliance.lumped must be true or false")
         if not isinstance(lateral, bool) and not (
             isinstance(lateral, list) and all(isinstance(j, int) for j in lateral)
         ):
             raise CalibrationError(
                 f"{label}: compliance.lateral must be true, false or a list of joints"
             )
-        terms += compliance_terms(robot, joints, lumped, lateral is True)
+        if isinstance(lumped, list):
+            terms += _lumped_subsets(robot, joints, lumped, label)
+        elif lumped is not None and not isinstance(lumped, bool):
+            raise CalibrationError(
+                f"{label}: compliance.lumped must be true, false or a list of lumped terms"
+            )
+        else:
+            terms += compliance_terms(robot, joints, lumped, lateral is True)
         if isinstance(lateral, list) and lateral:
             from .elastic import lateral_terms
 
@@ -140,6 +157,32 @@ def _joints(robot, joints: list[int], label: str) -> list[int]:
     return joints
 
 
+def _lumped_subsets(robot, joints, names: list, label: str) -> list:
+    """The lumped terms `names` (``g{j}_{k}m/x/y/z``) of `joints` (default: the joints
+    they name), one term per joint."""
+    from .lumped_basis import NAME, lumped_subset
+
+    parsed = [NAME.match(n) if isinstance(n, str) else None for n in names]
+    if not names or not all(parsed):
+        raise CalibrationError(
+            f"{label}: compliance.lumped must be true, false or a list of lumped terms by "
+            'name (g<joint>_<body><m|x|y|z>), e.g. ["g2_2m", "g3_3z"]'
+        )
+    named = [int(m[1]) for m in parsed]
+    joints = sorted(set(named)) if joints is None else [int(j) for j in joints]
+    stray = [n for n, j in zip(names, named, strict=True) if j not in joints]
+    if stray:
+        raise CalibrationError(
+            f"{label}: compliance.lumped names {stray[0]!r}, a term of a joint not in "
+            f"compliance.joints {joints}; add the joint or remove the term"
+        )
+    by_joint = {j: [n for n, i in zip(names, named, strict=True) if i == j] for j in joints}
+    try:
+        return [lumped_subset(j, len(robot.joints), v) for j, v in by_joint.items() if v]
+    except CalibrationError as exc:
+        raise CalibrationError(f"{label}: compliance.lumped: {exc}") from None
+
+
 def _table(data: dict, key: str, label: str) -> dict:
     table = data[key]
     if not isinstance(table, dict):
@@ -163,8 +206,11 @@ def terms_lines(robot) -> list[str]:
         by_kind.setdefault(t.kind, []).append(t)
     other = [t for t in robot.terms if t.kind not in BUILT_IN_KINDS]
     user = [_user_lines(robot, t) for t in other]
-    comp = by_kind.get("compliance", []) + by_kind.get("lumped_compliance", [])
-    if by_kind.get("compliance") and by_kind.get("lumped_compliance"):
+    lumped_terms = by_kind.get("lumped_compliance", []) + by_kind.get(
+        "lumped_compliance_subset", []
+    )
+    comp = by_kind.get("compliance", []) + lumped_terms
+    if by_kind.get("compliance") and lumped_terms:
         raise CalibrationError(
             f"robot {robot.name!r}: compliance with masses and lumped terms together cannot "
             "be saved; keep one kind"
@@ -176,7 +222,9 @@ def terms_lines(robot) -> list[str]:
             "saved; add the joints' compliance (with_compliance(lateral=True))"
         )
     if comp:
-        lumped = "true" if "lumped_compliance" in by_kind else "false"
+        lumped = "true" if lumped_terms else "false"
+        if "lumped_compliance_subset" in by_kind:  # some terms only: name them
+            lumped = "[" + ", ".join(f'"{n}"' for t in comp for n in t.parameters) + "]"
         lines += ["", "[compliance]", f"joints = {[t.joint for t in comp]}", f"lumped = {lumped}"]
         if lateral:
             lines.append(f"lateral = {[t.joint for t in lateral]}")
