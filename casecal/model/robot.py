@@ -717,7 +717,7 @@ class Robot:
         """A new Robot with the error terms `terms` (`casecal.model.terms.ErrorTerm`) added."""
         return dataclasses.replace(self, terms=(*self.terms, *terms), auto_beta=False)
 
-    def with_compliance(self, joints=None, lateral: bool = False) -> Robot:
+    def with_compliance(self, joints=None, lateral: bool = False, lumped=None) -> Robot:
         """A new Robot whose revolute joints `joints` (1-based; None: every joint that
         carries gravity load) turn by ``c{i}·τ_i`` under gravity, τ_i the torque about the
         joint of every body it carries (on a tree, across branches). Without masses
@@ -726,10 +726,23 @@ class Robot:
         `lateral`: each joint also bends across its axis, by ``c{i}_u``, ``c{i}_v``
         (rad/(N·m)) times the gravity moment about two axes perpendicular to it
         (`casecal.model.elastic`; masses needed).
+
+        `lumped`: True for lumped terms even where masses are known; ``"reduced"`` for
+        the lumped terms without the exactly redundant ones (the same fit with half the
+        parameters, `casecal.model.lumped_basis`; a chain). Which of them predict:
+        `casecal.identification.lumped_select.select_lumped`.
         """
         from .terms import compliance_terms
 
-        return self.with_terms(*compliance_terms(self, joints, lateral=lateral))
+        if lumped == "reduced":
+            from .lumped_basis import reduced_lumped_terms
+
+            if lateral:
+                raise CalibrationError("lateral compliance needs masses, not lumped terms")
+            return self.with_terms(*reduced_lumped_terms(self, joints))
+        if lumped not in (None, True, False):
+            raise CalibrationError(f"lumped must be None, True, False or 'reduced', not {lumped!r}")
+        return self.with_terms(*compliance_terms(self, joints, lumped, lateral))
 
     def with_masses(self, joints=None) -> Robot:
         """A new Robot whose bodies' masses (``m{k}``, kg) and centres of mass

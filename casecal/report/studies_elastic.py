@@ -121,7 +121,7 @@ def _trial(task) -> list[dict]:
 def elastic_study(out: Path, quick: bool = False, run=None) -> StudyResult:
     """Held-out error against pose count: rigid tree, joint, joint + lateral compliance."""
     res = StudyResult("elastic", "An elastic humanoid: joint and lateral compliance on a tree")
-    counts = (250,) if quick else (125, 250)
+    counts = (250,) if quick else (125, 180, 250)
     tasks = [(n, 0) for n in counts]
     if run is None:
         from ..studies.executor import Executor
