@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
+from casecal.report.studies_elastic import true_robot
 
 ROOT = Path(__file__).parents[1]
 _spec = importlib.util.spec_from_file_location(
@@ -41,25 +42,6 @@ HELD_OUT = 1.12
 @pytest.fixture(scope="module")
 def nominal():
     return H.user_robot().with_compliance(lateral=True).with_plausible(compliance=1e-3)
-
-
-def true_robot(nominal, seed: int):
-    """`nominal` with 5 mm / 0.7° on every origin, the marker frames, the zero offsets and
-    the torso's and arms' compliances (`H.COMPLIANCE`, `H.BENDING`)."""
-    rng = np.random.default_rng(seed)
-    deviations = {}
-    for name in nominal.parameter_names:
-        field = name.rsplit(".", 1)[-1]
-        if field in ("x", "y", "z"):
-            deviations[name] = rng.normal(0, 5e-3)
-        elif field in ("roll", "pitch", "yaw", "offset"):
-            deviations[name] = rng.normal(0, math.radians(0.7))
-    names = [j.name for j in nominal.joints]
-    for i, joint in enumerate(names, start=1):
-        part = "torso" if joint.startswith("torso") else "arm"
-        deviations[f"c{i}"] = H.COMPLIANCE[part]
-        deviations[f"c{i}_u"], deviations[f"c{i}_v"] = H.BENDING[part]
-    return nominal.with_deviations({n: v for n, v in deviations.items() if n in nominal.parameters})
 
 
 def fit(nominal, seed: int):
@@ -114,6 +96,8 @@ def test_the_compliances_come_back_within_their_standard_errors_monte_carlo(nomi
         z_all += [v for n, v in z.items() if n.startswith("c")]
         held.append(held_out)
     z_all = np.array(z_all)
-    assert abs(z_all.mean()) < 4 / math.sqrt(len(z_all)) * 1.5, z_all.mean()
+    # the mean of n standard normals has standard error 1/√n; the trials' z share each
+    # trial's geometry, so allow twice the 3-SE band
+    assert abs(z_all.mean()) < 6 / math.sqrt(len(z_all)), z_all.mean()
     assert 0.75 < z_all.std() < 1.3, z_all.std()
     assert max(held) < FLOOR * HELD_OUT, np.array(held) * 1e3

@@ -271,25 +271,16 @@ def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=(), c
 
 
 def gravity_torque(ctx: TermContext, joint: int, inertials) -> ca.SX:
-    """Gravity's torque about joint `joint` (1-based) of the bodies beyond it, N·m.
+    """Gravity's torque about joint `joint` (1-based) of the bodies it carries, N·m: the
+    component along its axis of `casecal.model.elastic.gravity_moment`.
 
     `inertials` holds per joint (mass kg, centre of mass xyz m in the body's frame), or
     None for a body without mass; the robot's mass parameters take their place where it
     has them (`casecal.model.masses`).
     """
-    from .masses import body_mass
+    from .elastic import gravity_moment
 
-    i = joint - 1
-    torque = ca.SX(0)
-    for k in ctx.beyond(joint):
-        inertial = body_mass(ctx, k, inertials)
-        if inertial is None:
-            continue
-        mass, com = inertial
-        body = ctx.bodies[k]
-        centre = body[:3, :3] @ com + body[:3, 3]
-        torque = torque + ca.dot(ca.cross(centre - ctx.points[i], mass * ctx.gravity), ctx.axes[i])
-    return torque
+    return ca.dot(gravity_moment(ctx, joint, inertials), ctx.axes[joint - 1])
 
 
 def _compliance(ctx: TermContext, term: ErrorTerm) -> ca.SX:
