@@ -32,9 +32,12 @@ from .compensate_solve import (
     AMPLIFICATION,
     REACHED,
     aligned_axes,
+    error_norms,
+    matches_orientation,
     pose_errors,
     solve,
 )
+from .compensate_tree import check_same_tips, tree_rows
 from .frames import rigid_fit
 from .robot import Robot, check_joint_values
 
@@ -116,7 +119,9 @@ def registration(nominal: Robot, calibrated: Robot) -> tuple[np.ndarray, float, 
         RMS distance of the tool points without and with X, m.
     """
     q = registration_poses(nominal)
-    p_nominal, p_calibrated = nominal.position(q), calibrated.position(q)
+    # a tree's tips' points, all in one fit
+    p_nominal = nominal.position(q).reshape(-1, 3)
+    p_calibrated = calibrated.position(q).reshape(-1, 3)
     R, t = rigid_fit(p_nominal, p_calibrated)
     X = np.eye(4)
     X[:3, :3], X[:3, 3] = R, t
@@ -186,10 +191,6 @@ def compensate(
         another tool, or for ``"instrument"`` a nominal base frame that is not where the
         instrument saw the robot.
     """
-    if calibrated.is_tree or (nominal is not None and nominal.is_tree):
-        from .kinematics import tree_refusal
-
-        raise tree_refusal("compensation (joint values for several tips at once)")
     if frame not in FRAMES:
         raise CalibrationError(
             f"unknown compensation frame {frame!r}; use 'robot' (targets in the robot's base "
@@ -202,7 +203,28 @@ def compensate(
     _check_same_robot(frame, before, after)
     if frame == "instrument":
         X = np.eye(4)
-    target = X @ nominal.fk(q_t)
+    target = X @ nominal.fk(q_t)  # a tree's: (N, tips, 4, 4)
+    rows = _rows(calibrated, orientation)
+    found = solve(calibrated, q_t, target, rows, max_iterations, scale=nominal)
+    ok, reason = _judge(calibrated, q_t, found, rows)
+    q = np.where(ok[:, None], found.q, q_t)
+    e = pose_errors(calibrated, q, target)  # where the returned values put the tool
+    position_error, orientation_error = error_norms(e, rows)
+    return Compensation(
+        q=q,
+        ok=ok,
+        position_error=position_error,
+        orientation_error=orientation_error,
+        reason=tuple(reason),
+        frame=frame,
+        registration=X,
+    )
+
+
+def _rows(calibrated: Robot, orientation: bool | None):
+    """The pose error rows to match (`solve`): a slice of the six, a tree's indices."""
+    if calibrated.is_tree:
+        return tree_rows(calibrated, orientation)
     if orientation is None:
         orientation = calibrated.dof >= 6
     if orientation and calibrated.dof < 6:
@@ -210,20 +232,7 @@ def compensate(
             f"robot {calibrated.name!r} has {calibrated.dof} joints: too few to set the "
             "tool's orientation as well as its position; match the position only"
         )
-    rows = slice(None) if orientation else slice(0, 3)
-    found = solve(calibrated, q_t, target, rows, max_iterations, scale=nominal)
-    ok, reason = _judge(calibrated, q_t, found, rows)
-    q = np.where(ok[:, None], found.q, q_t)
-    e = pose_errors(calibrated, q, target)  # where the returned values put the tool
-    return Compensation(
-        q=q,
-        ok=ok,
-        position_error=np.linalg.norm(e[:, :3], axis=1),
-        orientation_error=np.linalg.norm(e[:, 3:], axis=1) if orientation else np.zeros(len(q)),
-        reason=tuple(reason),
-        frame=frame,
-        registration=X,
-    )
+    return slice(None) if orientation else slice(0, 3)
 
 
 def _nominal(calibrated: Robot, nominal: Robot | None) -> Robot:
@@ -237,6 +246,7 @@ def _nominal(calibrated: Robot, nominal: Robot | None) -> Robot:
         from .catalog import nominal_of
 
         nominal = nominal_of(calibrated)
+    check_same_tips(nominal, calibrated)
     if nominal.dof != calibrated.dof:
         raise CalibrationError(
             f"the nominal robot has {nominal.dof} joints, the calibrated one {calibrated.dof}"
@@ -291,7 +301,7 @@ def _judge(robot: Robot, q_t: np.ndarray, found, rows: slice) -> tuple[np.ndarra
         & ~too_far
         & ~outside.any(axis=1)
     )
-    position_only = rows != slice(None)
+    position_only = not matches_orientation(rows)
     off = "mm off" if position_only else "mm or mrad off"
     reason = [""] * len(q)
     for k in np.flatnonzero(~ok):  # words only for the rows that need them
