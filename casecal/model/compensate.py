@@ -19,6 +19,10 @@ where the controller meant. What "that pose" is depends on the frame the targets
 The search itself (`casecal.model.compensate_solve`) starts at the targets' joint values and
 takes the smallest joint change; a row whose change is far larger than the pose difference
 can justify (near a singularity) is refused with the joint and the numbers.
+
+A kinematic tree (several tips) is compensated the same way, every tip at once: per pose
+one search over all its joints, each tip to the nominal tree's pose of it
+(`casecal.model.compensate_tree`).
 """
 
 from __future__ import annotations
@@ -59,7 +63,8 @@ class Compensation:
     Attributes
     ----------
     q : ndarray, shape (N, dof)
-        Joint values to send, rad (R) or m (P); the target itself on rows that failed.
+        Joint values to send (the controller's joints), rad (R) or m (P); the target
+        itself on rows that failed.
     ok : ndarray of bool, shape (N,)
         Converged to the target, not near a singularity (the correction is no larger than
         the pose difference justifies) and within the joint limits.
@@ -67,6 +72,8 @@ class Compensation:
         Where the calibrated robot's tool ends at the returned values, against the target,
         m and rad (0 where only the position is matched: fewer than six joints, or
         ``orientation=False``); on a failed row, the error the uncorrected target leaves.
+        A tree's: the largest over its tips (orientation over the tips whose orientation
+        is matched, `casecal.model.compensate_tree.tree_rows`).
     reason : tuple of str
         Per row: "" when `ok`, else why not, in words and numbers ("near a singularity
         (axes of joints 4 and 6 0.4° apart): the correction would turn joint 4 by 41°
@@ -142,7 +149,9 @@ def compensate(
     Parameters
     ----------
     calibrated : Robot
-        The real robot, as identified (with its fitted base frame).
+        The real robot, as identified (with its fitted base frame), error terms included
+        (its compliance's deflections at the returned joints are part of where it goes);
+        a tree brings every tip to the nominal tree's pose of it.
     q_targets : array-like, shape (N, dof) or (dof,)
         The joint values the program sends today, rad (R) or m (P).
     nominal : Robot, optional
@@ -162,9 +171,11 @@ def compensate(
         corrected.
     orientation : bool, optional
         Match the tool's orientation as well as its position; default: for arms of six
-        or more joints. Give False for a calibration from positions alone, whose tool
-        orientation may be blind (Notes): the position is then matched with the least
-        joint motion, and the orientation is left as the joints put it.
+        or more joints; on a tree, per tip, for tips six or more joints move
+        (`casecal.model.compensate_tree.tree_rows`). Give False for a calibration from
+        positions alone, whose tool orientation may be blind (Notes): the position is then
+        matched with the least joint motion, and the orientation is left as the joints put
+        it.
 
     Returns
     -------
@@ -186,7 +197,7 @@ def compensate(
     Raises
     ------
     CalibrationError
-        No nominal robot, joint counts that differ, an unknown frame, or nominal and
+        No nominal robot, joint counts or tips that differ, an unknown frame, or nominal and
         calibrated robots more than 50 mm apart (RMS over the poses): another robot,
         another tool, or for ``"instrument"`` a nominal base frame that is not where the
         instrument saw the robot.
