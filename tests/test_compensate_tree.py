@@ -150,6 +150,27 @@ def test_orientation_is_matched_only_where_asked_and_possible():
         cc.compensate(real, q, cc.load_robot(EXAMPLE, tip_link=["left_marker"]))
 
 
+def test_more_values_to_match_than_joints_are_refused(tmp_path):
+    """The chest and both shoulder mounts turned into joints: six joints move each marker,
+    so both orientations by default, 12 values for 10 joints: refused, positions work."""
+    text = EXAMPLE.read_text()
+    for name in ("chest_fixed", "right_mount", "left_mount"):
+        text = text.replace(
+            f'<joint name="{name}" type="fixed">',
+            f'<joint name="{name}" type="revolute"><axis xyz="0 1 0"/>'
+            '<limit lower="-1" upper="1" effort="1" velocity="1"/>',
+        )
+    (tmp_path / "ten.urdf").write_text(text)
+    nominal = cc.load_robot(tmp_path / "ten.urdf", tip_link=TIPS)
+    assert nominal.dof == 10
+    real = deviated(nominal, 4)
+    q = cc.poses.uniform(nominal, 20, seed=9)
+    with pytest.raises(cc.CalibrationError, match="12 values to match and it has 10 joints"):
+        cc.compensate(real, q, nominal)
+    out = cc.compensate(real, q, nominal, frame="instrument", orientation=False)
+    assert out.ok.mean() > 0.7 and misses(real, out.q, nominal, q)[0][out.ok].max() < 1e-6
+
+
 def test_a_target_the_calibrated_tree_cannot_reach_is_reported(tmp_path):
     """The right marker at its farthest from the torso's axis (found here by scipy on the
     nominal tree): a calibrated tree whose right arm is 1 % shorter reaches less far

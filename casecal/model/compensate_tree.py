@@ -12,8 +12,11 @@ its position when six or more controller joints move it (the joints on its path 
 base, counted through the coupling), its position only with fewer (`tree_rows`). With
 more joints than matched rows (a humanoid's two hands: 12 rows, 17 joints), the search
 takes the smallest correction from the commanded joints (the minimum-norm Gauss-Newton
-step, joints weighed by their levers); with fewer, a pose the calibrated tree cannot put
-every tip on is reported out of reach with what it misses, never returned as corrected.
+step, joints weighed by their levers). With more rows than joints (a torso of three joints
+and two arms of three: six joints move each hand, 12 rows for 9 joints), no joint values
+put every tip there in general, and that is refused (`tree_rows`). A pose the calibrated
+tree cannot put every tip on is reported out of reach with what it misses, never returned
+as corrected.
 """
 
 from __future__ import annotations
@@ -74,7 +77,8 @@ def tree_rows(robot: Robot, orientation: bool | None) -> np.ndarray:
     Raises
     ------
     CalibrationError
-        ``orientation=True`` with a tip fewer than six joints move.
+        ``orientation=True`` with a tip fewer than six joints move; more rows to match
+        than the robot has (controller) joints, which no joint values satisfy in general.
     """
     counts = tip_joints(robot)
     if orientation:
@@ -90,4 +94,18 @@ def tree_rows(robot: Robot, orientation: bool | None) -> np.ndarray:
     for k, n in enumerate(counts):
         full = n >= 6 if orientation is None else bool(orientation)
         rows += range(6 * k, 6 * k + (6 if full else 3))
+    if len(rows) > robot.dof:
+        # more values to match than joints: no joint values put every tip there, but
+        # where the calibrated tree happens to be the nominal one
+        what = "positions and orientations" if len(rows) > 3 * len(counts) else "positions"
+        hint = (
+            "; match positions only (orientation=False, --position-only)"
+            if 3 * len(counts) <= robot.dof
+            else ""
+        )
+        raise CalibrationError(
+            f"robot {robot.name!r}: its {len(counts)} tips' {what} are {len(rows)} values to "
+            f"match and it has {robot.dof} joints: no joint values put every tip where the "
+            f"nominal robot does{hint}"
+        )
     return np.array(rows, dtype=int)
