@@ -244,3 +244,26 @@ def test_the_command_line_compensates_a_tree(tmp_path, capsys):
     ok = df.ok.to_numpy() == 1
     assert ok.mean() > 0.7
     assert misses(real, got, nominal, q)[0][ok].max() < 1e-6
+
+
+def test_the_command_line_takes_the_coupled_elastic_humanoid(tmp_path, capsys):
+    """Robot files of the true elastic humanoid and its nominal (couplings, compliance):
+    17 controller joints in, 17 out, each tip where the nominal robot puts it."""
+    from casecal.report.studies_elastic import humanoid, models, true_robot
+
+    nominal = humanoid()
+    true = true_robot(models()["joint + lateral compliance"], 0)
+    cc.save_robot(true, tmp_path / "true.toml")
+    cc.save_robot(nominal, tmp_path / "nominal.toml")
+    lo, hi = nominal.limits.T
+    q = (lo + hi) / 2 + 0.5 * (cc.poses.uniform(nominal, 8, seed=10) - (lo + hi) / 2)
+    pd.DataFrame({f"q{i + 1}": q[:, i] for i in range(17)}).to_csv(tmp_path / "t.csv", index=False)
+    argv = ["compensate", str(tmp_path / "true.toml"), str(tmp_path / "t.csv"), "--frame"]
+    argv += ["instrument", "--nominal", str(tmp_path / "nominal.toml")]
+    assert main([*argv, "-o", str(tmp_path / "out.csv")]) == 0, capsys.readouterr().err
+    df = pd.read_csv(tmp_path / "out.csv")
+    assert [c for c in df.columns if c.startswith("q")] == [f"q{i}_deg" for i in range(1, 18)]
+    got, ok = np.deg2rad(df.filter(like="_deg").to_numpy()), df.ok.to_numpy() == 1
+    assert ok.mean() > 0.7
+    distance, turn = misses(true, got, nominal, q)
+    assert distance[ok].max() < 1e-6 and turn[ok].max() < 1e-6
