@@ -314,6 +314,7 @@ def _judge(robot: Robot, q_t: np.ndarray, found, rows: slice) -> tuple[np.ndarra
     )
     position_only = not matches_orientation(rows)
     off = "mm off" if position_only else "mm or mrad off"
+    tool = "tips up to" if robot.is_tree else "tool"
     reason = [""] * len(q)
     for k in np.flatnonzero(~ok):  # words only for the rows that need them
         dp, dphi = found.difference[k]
@@ -328,7 +329,7 @@ def _judge(robot: Robot, q_t: np.ndarray, found, rows: slice) -> tuple[np.ndarra
             if found.condition[k] > NEAR:
                 words += f" near a singularity (condition number {found.condition[k]:.3g})"
             reason[k] = (
-                f"{words}: the nearest joint values found leave the tool "
+                f"{words}: the nearest joint values found leave the {tool} "
                 f"{found.miss[k] * 1e3:.3g} {off}"
             )
         elif too_far[k]:
