@@ -21,7 +21,8 @@ def add_command(command) -> None:
         "joints), with ok = 0 and a reason where a target cannot be corrected (at or near "
         "a singularity, where the correction would be far larger than the calibration "
         "errors justify; not reached; outside the joint limits): those rows keep the "
-        "target.",
+        "target. A kinematic tree (--tip-link A,B) brings every tip to the nominal "
+        "tree's pose of it at once.",
     )
     p.add_argument("robot", metavar="CALIBRATED", help="calibrated robot file (.toml or .urdf)")
     p.add_argument("targets", metavar="CSV", help="joint targets ('-' for standard input)")

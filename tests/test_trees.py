@@ -416,12 +416,13 @@ def test_what_trees_do_not_support_yet_is_refused(urdf_path, tmp_path):
         lambda: robot.with_points([[0.0, 0.0, 0.1]]),
         lambda: robot.with_inputs(payload_kg=0.0),
         lambda: cc.simulate(robot, q, orientation_noise=1e-3),
-        lambda: cc.compensate(robot, q, nominal=robot),
-        lambda: robot._evaluate("joint_jacobian", q),
         lambda: cc.observability(robot, q, "all", measurement="pose"),
     ):
         with pytest.raises(cc.CalibrationError, match=geometric):
             make()
+    # compensation and joint Jacobians are no longer refused (tests/test_compensate_tree.py)
+    assert cc.compensate(robot, q, nominal=robot).ok.all()
+    assert robot._evaluate("joint_jacobian", q).shape == (10, 12, robot.dof)
     meas = cc.simulate(robot, q)
     one = cc.Measurements(meas.q, meas.positions[:, :1], 0.0)
     with pytest.raises(cc.CalibrationError, match="tree with 2 tips"):
@@ -551,8 +552,7 @@ def test_the_audit_sees_one_branch_shrunk():
 
 def test_the_command_line_takes_a_tree(tmp_path, capsys):
     """``--tip-link A,B``: identify writes the calibrated tree (URDF, TOML; a UR file is
-    refused), validate and calibrate-until take it, show lists the tips; compensation and
-    error terms are refused by name (exit 2), as in the API."""
+    refused), validate, calibrate-until and compensate take it, show lists the tips."""
     tree = cc.load_robot(EXAMPLE, tip_link=TIPS)
     true = tree.with_deviations({"torso_yaw.x": 1e-3, "left_elbow.roll": 1e-3})
     cc.write_csv(
@@ -585,7 +585,8 @@ def test_the_command_line_takes_a_tree(tmp_path, capsys):
     shown = capsys.readouterr().out
     assert "tip left_marker on left_wrist_roll" in shown and "tool:" not in shown
     assert (
-        main(["compensate", out, h, "--nominal", urdf, "-o", str(tmp_path / "c.csv"), *tips]) == 2
+        main(["compensate", out, h, "--nominal", urdf, "-o", str(tmp_path / "c.csv"), *tips]) == 0
     )
-    assert "not supported on a kinematic tree" in capsys.readouterr().err
+    assert "wrote 60 corrected targets" in capsys.readouterr().out
+    assert len(pd.read_csv(tmp_path / "c.csv")) == 60
     assert main(["show", urdf, "--tip-link", "right_marker,"]) == 2

@@ -19,6 +19,10 @@ where the controller meant. What "that pose" is depends on the frame the targets
 The search itself (`casecal.model.compensate_solve`) starts at the targets' joint values and
 takes the smallest joint change; a row whose change is far larger than the pose difference
 can justify (near a singularity) is refused with the joint and the numbers.
+
+A kinematic tree (several tips) is compensated the same way, every tip at once: per pose
+one search over all its joints, each tip to the nominal tree's pose of it
+(`casecal.model.compensate_tree`).
 """
 
 from __future__ import annotations
@@ -32,9 +36,12 @@ from .compensate_solve import (
     AMPLIFICATION,
     REACHED,
     aligned_axes,
+    error_norms,
+    matches_orientation,
     pose_errors,
     solve,
 )
+from .compensate_tree import check_same_tips, tree_rows
 from .frames import rigid_fit
 from .robot import Robot, check_joint_values
 
@@ -56,7 +63,8 @@ class Compensation:
     Attributes
     ----------
     q : ndarray, shape (N, dof)
-        Joint values to send, rad (R) or m (P); the target itself on rows that failed.
+        Joint values to send (the controller's joints), rad (R) or m (P); the target
+        itself on rows that failed.
     ok : ndarray of bool, shape (N,)
         Converged to the target, not near a singularity (the correction is no larger than
         the pose difference justifies) and within the joint limits.
@@ -64,6 +72,8 @@ class Compensation:
         Where the calibrated robot's tool ends at the returned values, against the target,
         m and rad (0 where only the position is matched: fewer than six joints, or
         ``orientation=False``); on a failed row, the error the uncorrected target leaves.
+        A tree's: the largest over its tips (orientation over the tips whose orientation
+        is matched, `casecal.model.compensate_tree.tree_rows`).
     reason : tuple of str
         Per row: "" when `ok`, else why not, in words and numbers ("near a singularity
         (axes of joints 4 and 6 0.4° apart): the correction would turn joint 4 by 41°
@@ -116,7 +126,9 @@ def registration(nominal: Robot, calibrated: Robot) -> tuple[np.ndarray, float, 
         RMS distance of the tool points without and with X, m.
     """
     q = registration_poses(nominal)
-    p_nominal, p_calibrated = nominal.position(q), calibrated.position(q)
+    # a tree's tips' points, all in one fit
+    p_nominal = nominal.position(q).reshape(-1, 3)
+    p_calibrated = calibrated.position(q).reshape(-1, 3)
     R, t = rigid_fit(p_nominal, p_calibrated)
     X = np.eye(4)
     X[:3, :3], X[:3, 3] = R, t
@@ -137,7 +149,9 @@ def compensate(
     Parameters
     ----------
     calibrated : Robot
-        The real robot, as identified (with its fitted base frame).
+        The real robot, as identified (with its fitted base frame), error terms included
+        (its compliance's deflections at the returned joints are part of where it goes);
+        a tree brings every tip to the nominal tree's pose of it.
     q_targets : array-like, shape (N, dof) or (dof,)
         The joint values the program sends today, rad (R) or m (P).
     nominal : Robot, optional
@@ -157,9 +171,11 @@ def compensate(
         corrected.
     orientation : bool, optional
         Match the tool's orientation as well as its position; default: for arms of six
-        or more joints. Give False for a calibration from positions alone, whose tool
-        orientation may be blind (Notes): the position is then matched with the least
-        joint motion, and the orientation is left as the joints put it.
+        or more joints; on a tree, per tip, for tips six or more joints move
+        (`casecal.model.compensate_tree.tree_rows`). Give False for a calibration from
+        positions alone, whose tool orientation may be blind (Notes): the position is then
+        matched with the least joint motion, and the orientation is left as the joints put
+        it.
 
     Returns
     -------
@@ -181,15 +197,11 @@ def compensate(
     Raises
     ------
     CalibrationError
-        No nominal robot, joint counts that differ, an unknown frame, or nominal and
+        No nominal robot, joint counts or tips that differ, an unknown frame, or nominal and
         calibrated robots more than 50 mm apart (RMS over the poses): another robot,
         another tool, or for ``"instrument"`` a nominal base frame that is not where the
         instrument saw the robot.
     """
-    if calibrated.is_tree or (nominal is not None and nominal.is_tree):
-        from .kinematics import tree_refusal
-
-        raise tree_refusal("compensation (joint values for several tips at once)")
     if frame not in FRAMES:
         raise CalibrationError(
             f"unknown compensation frame {frame!r}; use 'robot' (targets in the robot's base "
@@ -202,7 +214,28 @@ def compensate(
     _check_same_robot(frame, before, after)
     if frame == "instrument":
         X = np.eye(4)
-    target = X @ nominal.fk(q_t)
+    target = X @ nominal.fk(q_t)  # a tree's: (N, tips, 4, 4)
+    rows = _rows(calibrated, orientation)
+    found = solve(calibrated, q_t, target, rows, max_iterations, scale=nominal)
+    ok, reason = _judge(calibrated, q_t, found, rows)
+    q = np.where(ok[:, None], found.q, q_t)
+    e = pose_errors(calibrated, q, target)  # where the returned values put the tool
+    position_error, orientation_error = error_norms(e, rows)
+    return Compensation(
+        q=q,
+        ok=ok,
+        position_error=position_error,
+        orientation_error=orientation_error,
+        reason=tuple(reason),
+        frame=frame,
+        registration=X,
+    )
+
+
+def _rows(calibrated: Robot, orientation: bool | None):
+    """The pose error rows to match (`solve`): a slice of the six, a tree's indices."""
+    if calibrated.is_tree:
+        return tree_rows(calibrated, orientation)
     if orientation is None:
         orientation = calibrated.dof >= 6
     if orientation and calibrated.dof < 6:
@@ -210,20 +243,7 @@ def compensate(
             f"robot {calibrated.name!r} has {calibrated.dof} joints: too few to set the "
             "tool's orientation as well as its position; match the position only"
         )
-    rows = slice(None) if orientation else slice(0, 3)
-    found = solve(calibrated, q_t, target, rows, max_iterations, scale=nominal)
-    ok, reason = _judge(calibrated, q_t, found, rows)
-    q = np.where(ok[:, None], found.q, q_t)
-    e = pose_errors(calibrated, q, target)  # where the returned values put the tool
-    return Compensation(
-        q=q,
-        ok=ok,
-        position_error=np.linalg.norm(e[:, :3], axis=1),
-        orientation_error=np.linalg.norm(e[:, 3:], axis=1) if orientation else np.zeros(len(q)),
-        reason=tuple(reason),
-        frame=frame,
-        registration=X,
-    )
+    return slice(None) if orientation else slice(0, 3)
 
 
 def _nominal(calibrated: Robot, nominal: Robot | None) -> Robot:
@@ -237,6 +257,7 @@ def _nominal(calibrated: Robot, nominal: Robot | None) -> Robot:
         from .catalog import nominal_of
 
         nominal = nominal_of(calibrated)
+    check_same_tips(nominal, calibrated)
     if nominal.dof != calibrated.dof:
         raise CalibrationError(
             f"the nominal robot has {nominal.dof} joints, the calibrated one {calibrated.dof}"
@@ -291,8 +312,9 @@ def _judge(robot: Robot, q_t: np.ndarray, found, rows: slice) -> tuple[np.ndarra
         & ~too_far
         & ~outside.any(axis=1)
     )
-    position_only = rows != slice(None)
+    position_only = not matches_orientation(rows)
     off = "mm off" if position_only else "mm or mrad off"
+    tool = "tips up to" if robot.is_tree else "tool"
     reason = [""] * len(q)
     for k in np.flatnonzero(~ok):  # words only for the rows that need them
         dp, dphi = found.difference[k]
@@ -307,7 +329,7 @@ def _judge(robot: Robot, q_t: np.ndarray, found, rows: slice) -> tuple[np.ndarra
             if found.condition[k] > NEAR:
                 words += f" near a singularity (condition number {found.condition[k]:.3g})"
             reason[k] = (
-                f"{words}: the nearest joint values found leave the tool "
+                f"{words}: the nearest joint values found leave the {tool} "
                 f"{found.miss[k] * 1e3:.3g} {off}"
             )
         elif too_far[k]:

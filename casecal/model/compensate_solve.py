@@ -67,10 +67,31 @@ class Solution:
 
 
 def pose_errors(robot: Robot, q: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Target minus the robot's tool pose: (N, 6), position m then rotation vector rad."""
+    """Target minus the robot's tool pose: (N, 6), position m then rotation vector rad; a
+    tree's tips one after the other, (N, 6 · tips), `target` then (N, tips, 4, 4)."""
     T = robot.fk(q)
-    rot = rotation_vector(target[:, :3, :3] @ np.transpose(T[:, :3, :3], (0, 2, 1)))
-    return np.concatenate([target[:, :3, 3] - T[:, :3, 3], rot], axis=1)
+    rot = rotation_vector(target[..., :3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2))
+    e = np.concatenate([target[..., :3, 3] - T[..., :3, 3], rot], axis=-1)
+    return e.reshape(len(q), -1)
+
+
+def error_norms(e: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
+    """Position and orientation errors per pose from pose errors `e` (N, 6 · tips), m and
+    rad: each tip's norms, the largest over the tips; orientation 0 for a tip whose rotation
+    rows are not among the matched `rows` (a slice or indices)."""
+    matched = np.zeros(e.shape[1], dtype=bool)
+    matched[rows] = True
+    e3, m3 = e.reshape(len(e), -1, 6), matched.reshape(-1, 6)
+    position = np.linalg.norm(e3[..., :3], axis=2).max(axis=1)
+    rotation = np.linalg.norm(np.where(m3[None, :, 3:], e3[..., 3:], 0.0), axis=2).max(axis=1)
+    return position, rotation
+
+
+def matches_orientation(rows) -> bool:
+    """Whether `rows` (a slice of the six, or a tree's indices) match any orientation."""
+    if isinstance(rows, slice):
+        return rows == slice(None)
+    return bool(np.any(np.asarray(rows) % 6 >= 3))
 
 
 def characteristic_length(robot: Robot) -> float:
@@ -81,14 +102,24 @@ def characteristic_length(robot: Robot) -> float:
     return 0.5 * reach if reach else 1.0
 
 
-def _weights(rows: slice, length: float) -> np.ndarray:
-    return np.array([1.0, 1.0, 1.0, length, length, length])[rows]
+def _weights(rows, length: float, tips: int = 1) -> np.ndarray:
+    """Per row of `rows` (a slice or indices of the six rows per tip), m per its unit."""
+    return np.tile([1.0, 1.0, 1.0, length, length, length], tips)[rows]
+
+
+def difference_norms(e: np.ndarray) -> np.ndarray:
+    """(N, 2): the norm of the position rows and of the orientation rows of pose errors `e`
+    (N, 6 · tips) from `pose_errors`, m and rad, over every tip."""
+    e = e.reshape(len(e), -1, 6)
+    return np.stack(
+        [np.linalg.norm(e[..., :3], axis=(1, 2)), np.linalg.norm(e[..., 3:], axis=(1, 2))], axis=1
+    )
 
 
 def joint_jacobian(robot: Robot, q: np.ndarray, rows: slice) -> np.ndarray:
-    """∂(position m, orientation rad)/∂q in the robot's world frame, (N, len(rows), dof);
-    q and the columns are the controller's joints (the model's Jacobian times the
-    coupling's M)."""
+    """∂(position m, orientation rad)/∂q in the robot's world frame, (N, len(rows), dof),
+    `rows` of the six (a tree's: of its 6 · tips, tip after tip); q and the columns are
+    the controller's joints (the model's Jacobian times the coupling's M)."""
     chain = kinematics.chain(robot.structure)
     J = chain.evaluate("joint_jacobian", robot.model_joints(q), robot.vector())[:, rows, :]
     return J if robot.coupling is None else J @ robot.coupling.M
@@ -99,7 +130,8 @@ def levers(J: np.ndarray, length: float) -> np.ndarray:
     the norm of its column of the full joint Jacobian `J` (N, 6, dof), a radian of
     orientation counted as `length`. Weighed so even where only the position is matched:
     turning a joint a radian is a large motion whether or not the matched point moves."""
-    ell = np.linalg.norm(J * _weights(slice(None), length)[None, :, None], axis=1)
+    w = _weights(slice(None), length, J.shape[1] // 6)
+    ell = np.linalg.norm(J * w[None, :, None], axis=1)
     return np.maximum(ell, 1e-300)
 
 
@@ -125,8 +157,9 @@ def solve(
         Where each search starts (the targets' joint values), rad or m.
     target : ndarray, shape (N, 4, 4)
         Tool poses in `robot`'s world frame, m.
-    rows : slice
-        Which of (x, y, z, rx, ry, rz) must match: all six, or the position.
+    rows : slice or ndarray of int
+        Which of (x, y, z, rx, ry, rz) must match: all six, or the position; a tree's: the
+        indices of the rows to match among its 6 · tips (`pose_errors`).
     max_iterations : int
     scale : Robot, optional
         The robot whose levers and size scale the joints (default `robot`). The nominal
@@ -139,7 +172,7 @@ def solve(
     """
     scale = robot if scale is None else scale
     length = characteristic_length(scale)
-    w = _weights(rows, length)
+    w = _weights(rows, length, len(robot.tips) if robot.is_tree else 1)
     ell = levers(joint_jacobian(scale, q_start, slice(None)), length)
     J0 = joint_jacobian(robot, q_start, rows)
     A0 = J0 * w[None, :, None] / ell[:, None, :]
@@ -147,9 +180,7 @@ def solve(
     singular = s0[:, -1] <= SINGULAR * s0[:, 0]
     condition = s0[:, 0] / np.maximum(s0[:, -1], 1e-300)
     e = pose_errors(robot, q_start, target)
-    difference = np.stack(
-        [np.linalg.norm(e[:, :3], axis=1), np.linalg.norm(e[:, 3:], axis=1)], axis=1
-    )
+    difference = difference_norms(e)
     e = e[:, rows]
     cost = np.sum((e * w) ** 2, axis=1)
     first = np.sqrt(cost)
@@ -195,9 +226,9 @@ def solve(
 def aligned_axes(robot: Robot, q: np.ndarray) -> tuple[int, int, float] | None:
     """The two revolute joints whose axes most nearly coincide at pose `q` (dof,), as
     (i, j, angle rad), 1-based; None when no two axes are within 10° and 10 mm of a
-    common line (what a wrist singularity looks like), and for a coupled robot, whose
-    controller joints need not turn about one axis each."""
-    if robot.coupling is not None:
+    common line (what a wrist singularity looks like), for a coupled robot, whose
+    controller joints need not turn about one axis each, and for a tree (several tips)."""
+    if robot.coupling is not None or robot.is_tree:
         return None
     J = joint_jacobian(robot, q[None, :], slice(None))[0]
     p = robot.fk(q)[:3, 3]

@@ -571,7 +571,20 @@ class Chain:
         if kind in ("position", "points"):
             return positions
         if kind == "joint_jacobian":
-            raise tree_refusal("joint Jacobians (compensation)")
+            # per tip what a chain gives of its tool: 3 position rows, then vee(∂R/∂q_i Rᵀ)
+            dof = len(self.structure.joint_types)
+            pairs = {i: (g.jcos[t], g.jsin[t]) for t, (i, _) in enumerate(self.joint_trig)}
+            joints = [(g.q[i], pairs.get(i)) for i in range(dof)]
+            dp = self._chain_rule(positions, joints)
+            dR = self._chain_rule(ca.vertcat(*(ca.vec(T[:3, :3]) for T in tips)), joints)
+            rows = []
+            for k, T in enumerate(tips):
+                omega = []
+                for i in range(dof):
+                    W = ca.reshape(dR[9 * k : 9 * k + 9, i], 3, 3) @ T[:3, :3].T
+                    omega.append(ca.vertcat(W[2, 1], W[0, 2], W[1, 0]))
+                rows += [dp[3 * k : 3 * k + 3, :], ca.horzcat(*omega)]
+            return ca.vertcat(*rows).T
         if kind not in PARAMETER_JACOBIANS:
             raise ValueError(f"unknown kind {kind!r}; expected one of {KINDS}")
         J = self._jacobian(positions, columns)
@@ -687,7 +700,8 @@ class Chain:
 
         A tree's: "fk" (tips, 4, 4), "position" (tips, 3), and its Jacobians' rows stacked
         tip after tip: (3 · tips, k) for the positions and points, (6 · tips, k) for the
-        pose (each tip's 3 position rows, then its 3 rotation rows).
+        pose (each tip's 3 position rows, then its 3 rotation rows) and, "joint_jacobian",
+        the joints (6 · tips, dof), rows as for the pose.
         """
         if self.structure.tips:
             n = len(self.structure.tips)
@@ -699,7 +713,7 @@ class Chain:
                 "points": (3 * n,),
                 "points_jacobian": (3 * n, k),
                 "points_and_jacobian": (3 * n, k + 1),
-                "joint_jacobian": (6, len(self.structure.joint_types)),
+                "joint_jacobian": (6 * n, len(self.structure.joint_types)),
             }[kind]
         m3 = 3 * max(self.structure.n_points, 1)
         return {

@@ -31,7 +31,8 @@ measured tip lies beyond, a head) at their joints' zero; their URDF ``<inertial>
 make `Robot.inertials`. Error terms work as on a serial chain, and a joint's gravity torque
 (`Robot.with_compliance`) comes from every body it carries, across branches: the torso
 bends under both arms. Measured points on a tip (`Robot.points`), per-pose inputs (a
-payload), orientation measurements, compensation and distance data are refused for now.
+payload), orientation measurements and distance data are refused for now. Compensation
+brings every tip to the nominal tree's pose of it at once (`casecal.model.compensate_tree`).
 """
 
 from __future__ import annotations
