@@ -733,7 +733,7 @@ def tree_refusal(what: str) -> CalibrationError:
     return CalibrationError(
         f"{what} are not supported on a kinematic tree (a robot with several tips) yet: "
         "trees support forward kinematics, error terms (compliance, harmonics), simulate, "
-        "identify and save for now; use one chain (tip_link= one link) for this"
+        "identify, compensate and save for now; use one chain (tip_link= one link) for this"
     )
 
 
