@@ -64,6 +64,7 @@ def z_scores(cal) -> dict[str, float]:
     }
 
 
+@pytest.mark.slow  # 60-80 s; the default run has the stand-in's (tests/test_humanoid.py)
 def test_joint_and_lateral_compliance_take_the_humanoid_to_the_noise_floor(nominal):
     cal, held_out, train = fit(nominal, seed=3)
     assert cal.success, cal.message

@@ -82,6 +82,7 @@ def test_mass_jacobians_against_central_differences(elastic_tree):
         assert np.abs(J[:, :, k] - fd).max() < 1e-6 * scale + 1e-12, name
 
 
+@pytest.mark.slow  # three fits of a 6R arm with compliance, about a minute
 def test_a_mass_the_cad_gets_wrong_is_found_from_what_it_bends():
     """A KR 120-class arm (the report's compliance study) whose last body weighs 150 kg
     where the CAD says 120, its joints' compliances known (the maker's): the CAD's mass
