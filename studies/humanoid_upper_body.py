@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
+import sys
 import tempfile
 import time
 import xml.etree.ElementTree as ET
@@ -305,6 +307,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=21, help="the true robot's seed (21)")
     parser.add_argument("--csv", help="write the 500 elastic poses to this CSV file too")
     args = parser.parse_args()
+    # a kill (SIGTERM) unwinds like Ctrl-C: the temporary folder below is removed
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     q = poses(500, seed=args.seed)
     floor = SIGMA * 1e3 * math.sqrt(8 / math.pi)  # mean length of a 3-D Gaussian error
     published = dict(zip(MODELS, (PUBLISHED_RIGID_MM, 5.6, 3.1), strict=True))
