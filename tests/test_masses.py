@@ -116,3 +116,21 @@ def test_a_mass_the_cad_gets_wrong_is_found_from_what_it_bends():
     together = cc.identify(start, meas, "all")
     assert "m6" not in together.estimated and together.held_reason("m6")
     assert not together.success
+
+
+def test_a_robot_file_keeps_the_masses_and_refuses_a_centre_in_millimetres(elastic_tree, tmp_path):
+    robot = elastic_tree.with_masses([2]).with_deviations({"m2": 0.5, "m2_x": 0.01})
+    cc.save_robot(robot, tmp_path / "r.toml")
+    back = cc.load_robot(tmp_path / "r.toml")
+    q = cc.poses.uniform(robot, 10, seed=3)
+    assert np.abs(back.position(q) - robot.position(q)).max() < 1e-12
+    assert back.parameters["m2"] == 2.5 and back.parameters["m2_x"] == pytest.approx(0.11)
+    text = (tmp_path / "r.toml").read_text()
+    mm = text.replace("m2_x = 0.11", "m2_x = 110.0")
+    assert mm != text
+    (tmp_path / "mm.toml").write_text(mm)
+    with pytest.raises(cc.CalibrationError, match=r"masses.m2_x = 110 m .* in SI \(m\)"):
+        cc.load_robot(tmp_path / "mm.toml")
+    (tmp_path / "neg.toml").write_text(text.replace("m2 = 2.5", "m2 = -2.5"))
+    with pytest.raises(cc.CalibrationError, match=r"masses.m2 = -2.5 kg is negative"):
+        cc.load_robot(tmp_path / "neg.toml")

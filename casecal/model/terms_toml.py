@@ -129,7 +129,9 @@ def add_terms(robot, data: dict, angle: float, label: str, number, length: float
         if not (isinstance(joints, list) and joints and all(isinstance(j, int) for j in joints)):
             raise CalibrationError(f"{label}: masses.joints must be a list of joints")
         terms += mass_terms(robot, joints)
-        values.update({k: number(v, label, f"masses.{k}") for k, v in table.items()})
+        given = {k: number(v, label, f"masses.{k}") for k, v in table.items()}
+        _check_masses(given, label)
+        values.update(given)
     if "harmonics" in data:
         table = _table(data, "harmonics", label)
         orders = table.pop("orders", None)
@@ -181,6 +183,19 @@ def _lumped_subsets(robot, joints, names: list, label: str) -> list:
         return [lumped_subset(j, len(robot.joints), v) for j, v in by_joint.items() if v]
     except CalibrationError as exc:
         raise CalibrationError(f"{label}: compliance.lumped: {exc}") from None
+
+
+def _check_masses(values: dict, label: str) -> None:
+    """Refuse a negative mass and a centre of mass beyond 10 m: the table is SI whatever
+    length_unit says, and 150 meant as mm would otherwise bend the robot by kilometres."""
+    for name, v in values.items():
+        if name[-2:] in ("_x", "_y", "_z") and abs(v) > 10.0:
+            raise CalibrationError(
+                f"{label}: masses.{name} = {v:g} m is no centre of mass; the [masses] table is "
+                f"in SI (m) whatever length_unit says: {v:g} mm is {v / 1000:g}"
+            )
+        if name[-2:] not in ("_x", "_y", "_z") and v < 0:
+            raise CalibrationError(f"{label}: masses.{name} = {v:g} kg is negative")
 
 
 def _table(data: dict, key: str, label: str) -> dict:
