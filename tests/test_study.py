@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -53,6 +55,27 @@ def test_local_processes_and_dask_give_the_same_frame(tmp_path):
     ):
         on_dask = run_study(SMALL, executor="dask", scheduler=client)
     pd.testing.assert_frame_equal(comparable(serial), comparable(on_dask))
+
+
+def test_a_dask_cluster_larger_than_this_machine_sets_the_worker_count(tmp_path):
+    """The tasks are cut for the cluster's worker threads, not the client's cores."""
+    distributed = pytest.importorskip("dask.distributed")
+    import dask
+
+    from casecal.studies.executor import Executor
+
+    threads = 3 * (os.cpu_count() or 1)
+    with (
+        dask.config.set({"temporary-directory": str(tmp_path)}),
+        distributed.LocalCluster(  # tcp: an address the executor accepts
+            n_workers=threads, threads_per_worker=1, processes=False, protocol="tcp"
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        assert Executor("dask", scheduler=client).n_workers == threads
+        by_address = Executor("dask", scheduler=cluster.scheduler_address)
+        assert by_address.n_workers == threads
+        assert Executor("dask", scheduler=client, workers=2).n_workers == 2
 
 
 def test_error_falls_as_poses_grow():

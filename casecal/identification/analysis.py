@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._threads import with_one_blas_thread
 from ..errors import CalibrationError
 from ..model.parameters import UNITS, facts_of, select, unit
 from ..model.robot import Robot, check_joint_values
@@ -128,6 +129,7 @@ class Observability:
         return "\n".join(lines)
 
 
+@with_one_blas_thread  # as `identify`: a study's truth analysis on a busy machine
 def observability(
     robot: Robot, q, parameters=None, measurement="position", orientation_weight: float = 0.1
 ):

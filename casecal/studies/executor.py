@@ -48,6 +48,7 @@ class Executor:
     progress: Callable[[int, int], None] | None = None
     _pool: object = field(default=None, init=False, repr=False, compare=False)
     _sigterm: object = field(default=None, init=False, repr=False, compare=False)
+    _cluster: int | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.kind not in EXECUTORS:
@@ -63,9 +64,17 @@ class Executor:
 
     @property
     def n_workers(self) -> int:
-        """How many trials run at once (1 for ``"serial"``)."""
+        """How many trials run at once (1 for ``"serial"``): for a dask scheduler, the
+        cluster's worker threads, not this machine's cores (the study's tasks are cut to
+        keep every worker busy)."""
         if self.kind == "serial":
             return 1
+        if self.workers is None and self.kind == "dask" and self.scheduler is not None:
+            if self._cluster is None and isinstance(self.scheduler, str):
+                self.check_reachable()  # counts the cluster's threads
+            elif self._cluster is None:  # a Client
+                self._cluster = _threads_of(self.scheduler)
+            return self._cluster
         return self.workers or os.cpu_count() or 1
 
     def map(self, func: Callable, tasks: Sequence, cost: Callable | None = None) -> list:
@@ -145,7 +154,8 @@ class Executor:
 
     def check_reachable(self, timeout: float = 10.0) -> None:
         """Connect to the scheduler address once, now, so that an address nothing answers
-        at is said before any work, not after the first studies; no-op without one."""
+        at is said before any work, not after the first studies, and count its workers'
+        threads (`n_workers`); no-op without one."""
         if not isinstance(self.scheduler, str):
             return
         try:
@@ -155,7 +165,8 @@ class Executor:
                 "the dask executor needs dask.distributed: pip install 'casecal[distributed]'"
             ) from None
         try:
-            Client(self.scheduler, timeout=timeout).close()
+            with Client(self.scheduler, timeout=timeout) as client:
+                self._cluster = _threads_of(client)
         except (OSError, TimeoutError) as exc:
             raise CalibrationError(
                 f"no dask scheduler answers at {self.scheduler!r} within {timeout:g} s "
@@ -192,6 +203,11 @@ class Executor:
             if own is not None:
                 client.close()
                 own.close()
+
+
+def _threads_of(client) -> int:
+    """Worker threads of a dask Client's cluster, at least 1."""
+    return max(sum(client.nthreads().values()), 1)
 
 
 _ADDRESS = re.compile(r"(?:(?:tcp|tls)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):([0-9]{1,5})")
