@@ -161,6 +161,34 @@ def test_a_qr_pass_rounds_the_same_on_any_number_of_cores(tiny_batches, monkeypa
     )
 
 
+@pytest.mark.parametrize("weights", ["one sigma", "per axis", "reweighted"])
+def test_passes_hold_the_weighted_system_whatever_the_weights(tiny_batches, weights):
+    """The QR pass and the normal equations (which leave rows of one shared weight
+    unweighted and scale what they sum) hold the system of the explicitly weighted
+    Jacobian: ``RᵀR = JᵀJ``, ``Rᵀ Qᵀr = Jᵀr``, ``G = JᵀJ``, ``g = Jᵀr``."""
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 90, seed=8)
+    meas = cc.simulate(robot.with_deviations({"a2": 2e-4, "d3": 1e-4}), q, noise=2e-5, seed=9)
+    w = np.full((90, 3), 1 / 2e-5)
+    if weights == "per axis":
+        w = w * [1.0, 2.0, 0.5]
+    names = ["a2", "d3", "alpha3", "theta4", "a3"]
+    problem = problem_module.Problem(robot, q, meas.positions, w, names)
+    if weights == "reweighted":
+        problem = problem.reweighted(np.linspace(0.2, 1.0, 90)[:, None])
+    assert (problem._uniform is not None) == (weights == "one sigma")
+    x = np.array([1e-4, -2e-4, 5e-5, 1e-4, 3e-5])
+    r, J = problem.residual(x), problem.jacobian(x)  # J: every row weighted by hand
+    red = problem._reduce(problem.p(x), r)
+    JtJ, Jtr = J.T @ J, J.T @ r
+    scale = np.abs(JtJ).max()
+    assert np.abs(red.R.T @ red.R - JtJ).max() < 1e-12 * scale
+    assert np.abs(red.R.T @ red.Qtr - Jtr).max() < 1e-12 * np.sqrt(scale * (r @ r))
+    G, g = problem._normal(problem.p(x), r)
+    assert np.abs(G - JtJ).max() < 1e-12 * scale
+    assert np.abs(g - Jtr).max() < 1e-12 * np.sqrt(scale * (r @ r))
+
+
 def test_reduction_keeps_what_the_tall_system_holds():
     """Folded in pieces, R and Qᵀr give lstsq's answer, the residual and the singular
     values of the tall system, also for a blind (rank-deficient) column pair."""

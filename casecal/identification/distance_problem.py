@@ -72,9 +72,9 @@ class DistanceProblem(Problem):
         key = self._evaluation_key(kind, p)
         return self._memoised(key, lambda: self._model(slice(None), p, None)[0])
 
-    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None):
+    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None, weigh: bool = True):
         f, J = self._model(poses, p, self.kernel_columns)
-        J *= self.w_rows[poses, :, None]
+        self._weigh(J, poses, weigh)
         return J.reshape(-1, J.shape[-1]), f
 
     def _model(self, rows, p, columns):

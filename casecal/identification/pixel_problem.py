@@ -118,9 +118,9 @@ class PixelProblem(Problem):
         key = self._evaluation_key(kind, p)
         return self._memoised(key, lambda: self._model(self.q, p, None, self.view.scale))
 
-    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None):
+    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None, weigh: bool = True):
         f, J = self._model(self.q[poses], p, self.kernel_columns, self.view.scale[poses])
-        J *= self.w_rows[poses, :, None]
+        self._weigh(J, poses, weigh)
         return J.reshape(-1, J.shape[-1]), f
 
     def _model(self, q, p, columns, scale):

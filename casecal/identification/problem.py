@@ -104,6 +104,7 @@ class Problem:
         if orientations is not None:
             self.w_rows = np.hstack([self.w_rows, np.full((n, 3), self.w_rot)])
         self.w_flat = self.w_rows.ravel()
+        self._uniform_of: tuple = (None, None)  # (w_rows, its one weight or None)
         # keys: (kind, structure, data, p bytes[, kernel columns]); the data part names the
         # arrays (poses for evaluations, all of them and the weights for reductions), so
         # problems of other data never meet in a shared memo; a reweighted copy, its own
@@ -320,10 +321,11 @@ class Problem:
         """``each(batches)`` for `FOLD_RUNS` runs of consecutive batches of poses at `p`,
         in threads (as many at once as there are cores), in order of the runs.
 
-        `batches` yields ``(J, f, poses, rows)`` per batch of the run: the weighted
-        Jacobian rows, the points (None with orientations) and the batch's slices of the
-        poses and of the residual vector, evaluated in the run's thread into one reused
-        buffer (valid until the next is asked for). Each run's arithmetic, and the
+        `batches` yields ``(J, f, poses, rows)`` per batch of the run: the Jacobian rows
+        (weighted, or unweighted where every row has the weight `_uniform`), the points
+        (None with orientations) and the batch's slices of the poses and of the residual
+        vector, evaluated in the run's thread into one reused buffer (valid until the next
+        is asked for). Each run's arithmetic, and the
         caller's combination of the runs in order, is the same whatever the core count.
         """
         batches, rows, shape = self._cuts()
@@ -331,7 +333,8 @@ class Problem:
         def run(indices):
             buffer = np.empty(shape)
             return each(
-                (*self._kernel_rows(p, batches[i], buffer), batches[i], rows[i]) for i in indices
+                (*self._kernel_rows(p, batches[i], buffer, weigh=False), batches[i], rows[i])
+                for i in indices
             )
 
         runs = [run for run in np.array_split(np.arange(len(batches)), FOLD_RUNS) if run.size]
@@ -345,7 +348,10 @@ class Problem:
         )
         for part in rest:
             whole = whole.merge(part)
-        return whole
+        if self._uniform is None:
+            return whole
+        # R of [c J | r] is R of [J | r] with its J columns times c: a memory pass saved
+        return dataclasses.replace(whole, R=whole.R * self._uniform)
 
     def _normal(self, p: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(JᵀJ, Jᵀr)`` of every kernel column, (k, k) and (k,)."""
@@ -353,7 +359,14 @@ class Problem:
         def residual(J, f, poses, rows):
             return r[rows]
 
-        return _summed(self._runs(p, lambda batches: self._gram(batches, residual)))
+        return self._weighed(_summed(self._runs(p, lambda batches: self._gram(batches, residual))))
+
+    def _weighed(self, normal: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """``(JᵀJ, Jᵀr)`` of the weighted J from the runs' sums, which are of the unweighted
+        J where the weights are one number c (`_kernel_rows`): ``(c² G, c g)``."""
+        G, g = normal
+        c = self._uniform
+        return (G, g) if c is None else (G * (c * c), g * c)
 
     def _gram(self, batches, residual) -> tuple[np.ndarray, np.ndarray]:
         """``(JᵀJ, Jᵀr)`` of one run's `batches`; ``residual(J, f, poses, rows)`` gives
@@ -376,16 +389,18 @@ class Problem:
             # as `residual` forms it, bit for bit
             return ((self.y[poses] - f_batch) * self.w_rows[poses]).ravel()
 
-        G, g = _summed(self._runs(p, lambda batches: self._gram(batches, residual)))
+        G, g = self._weighed(_summed(self._runs(p, lambda batches: self._gram(batches, residual))))
         self._memoised(self._evaluation_key("points", p), lambda: f)
         self._memoised(self._normal_key(p), lambda: (G, g))
 
-    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None):
+    def _kernel_rows(self, p: np.ndarray, poses: slice, buffer=None, weigh: bool = True):
         """Weighted Jacobian rows of `poses`, every kernel column, (rows, k_kernel), and
         the unweighted points (n, 3m) (None with orientations), from one evaluation.
 
         Written into `buffer` (C-ordered, (n ≥ poses, rows per pose, k_kernel + 1), or
-        k_kernel with orientations) if given.
+        k_kernel with orientations) if given. `weigh` False: where every row has the one
+        weight `_uniform`, the rows are left unweighted (the caller scales what it sums:
+        a pass over the rows saved).
         """
         q, k = self.q[poses], len(self.kernel_columns)
         out = None if buffer is None else buffer[: len(q)]
@@ -400,8 +415,23 @@ class Problem:
                 :, 3:, :
             ]  # J: (n, 3m, k)
             J, f = np.concatenate([J, rot], axis=1, out=out), None
-        J *= self.w_rows[poses, :, None]  # J is this call's own (or the caller's buffer)
+        self._weigh(J, poses, weigh)  # J is this call's own (or the caller's buffer)
         return J.reshape(-1, k), f
+
+    @property
+    def _uniform(self) -> float | None:
+        """The one weight of every row (one σ for all), or None (`_kernel_rows`)."""
+        rows, weight = self._uniform_of
+        if rows is not self.w_rows:  # weights set anew (a subclass's, a reweighted copy)
+            weight = _uniform(self.w_rows)
+            self._uniform_of = (self.w_rows, weight)
+        return weight
+
+    def _weigh(self, J: np.ndarray, poses: slice, weigh: bool = True) -> None:
+        """Multiply Jacobian rows (n, rows per pose, k) of `poses` by their weights in
+        place, unless `weigh` is False and they share one (`_kernel_rows`)."""
+        if weigh or self._uniform is None:
+            J *= self.w_rows[poses, :, None]
 
 
 def _summed(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
@@ -410,6 +440,12 @@ def _summed(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.
     for G_part, g_part in parts[1:]:
         G, g = G + G_part, g + g_part
     return G, g
+
+
+def _uniform(w_rows: np.ndarray) -> float | None:
+    """The one weight of every row, if they share one (one σ for all), else None."""
+    c = w_rows.flat[0] if w_rows.size else 0.0
+    return float(c) if c > 0 and np.all(w_rows == c) else None
 
 
 def _identity(a) -> tuple | None:
