@@ -14,7 +14,8 @@ core, spinning on a busy machine) once made 2 workers on 2 cores look 2.48x fast
 ``--repeat`` above 1 the serial and process runs alternate (`_timing.interleave`). Prints
 wall and CPU (this process plus its reaped workers) per run, median and min, and the
 speed-up (serial wall / wall, medians). The rows must be identical whatever the worker
-count and in the serial run (checked).
+count and in the serial run (checked). A last line measures what the machine allows right
+now: the speed-up of the largest count of pure-Python CPU-bound processes run together.
 
 Target (issue 23): a study of 256 trials speeds up >= 0.8x the worker count over the
 one-thread serial run, up to the cores present.
@@ -28,6 +29,7 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import time
 
 import numpy as np
 import pandas as pd
@@ -40,6 +42,30 @@ SERIAL = "serial, 1 thread"
 def children_cpu() -> float:
     r = resource.getrusage(resource.RUSAGE_CHILDREN)
     return r.ru_utime + r.ru_stime
+
+
+def _spin(n: int) -> int:
+    s = 0
+    for i in range(n):
+        s += i * i
+    return s
+
+
+def machine_parallelism(workers: int, n: int = 5_000_000) -> float:
+    """How many of `workers` CPU-bound processes the machine runs at once right now: their
+    speed-up over one after another (`workers` on idle cores). On a machine shared with
+    other work this bounds what any study engine could show."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(workers) as pool:
+        list(pool.map(_spin, [1000] * workers))  # started
+        t0 = time.perf_counter()
+        list(pool.map(_spin, [n] * workers))
+        together = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    _spin(n)
+    alone = time.perf_counter() - t0
+    return workers * alone / together
 
 
 def main():
@@ -113,6 +139,11 @@ def main():
             f"{name:<16} | {wall:10.2f} {t.stat(name, 'wall', np.min):7.2f} | {cpu:9.2f} | "
             f"{base / wall:7.2f}x | {base / wall / w:9.2f}x"
         )
+    probe = machine_parallelism(max(counts))
+    print(
+        f"  machine check after the runs: {max(counts)} CPU-bound processes ran {probe:.2f}x "
+        f"faster together than one after another ({max(counts)}x on idle cores)"
+    )
     print(
         "  speed-up: serial wall / wall (medians); target >= 0.8x the worker count up to the"
         " cores present. 1 worker runs in this process (`Executor.map`), on casecal's default"
