@@ -10,9 +10,10 @@ are one matrix product.
 
 `fair_gauss_newton` is Gauss-Newton on the selected columns with the normal equations
 JᵀJ and Jᵀr summed over batches of poses (memory O(k² + batch), not O(N k)), column
-scaling, a solve of the scaled k × k system, full steps, and the same relative-step stop
-as the old lstsq reference (`bench_identify.numpy_gauss_newton`). Benchmarks run it on one
-BLAS thread (`threadpoolctl.threadpool_limits(1)`).
+scaling, a solve of the scaled k × k system, full steps, and the relative-step stop of
+the old lstsq reference (`bench_identify.numpy_gauss_newton`) beside the predicted-decrease
+stop of casecal's Gauss-Newton. Benchmarks run it on one BLAS thread
+(`threadpoolctl.threadpool_limits(1)`).
 """
 
 from __future__ import annotations
