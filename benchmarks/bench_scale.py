@@ -1,34 +1,39 @@
-"""Identification at scale: time and peak memory against the pose count, and on a busy machine.
+"""Identification at scale: casecal against a fair numpy Gauss-Newton, CPU, wall and memory.
 
-PUMA 560, uniform poses, deviations on the identifiable theta/a/d/alpha, sigma = 0.02 mm,
-Gauss-Newton (the default). Each fit runs in a new process that loads the saved data and
-calls `casecal.identify` once: the time is that first call (imports excluded, kernels
-already compiled in this run's cache), the memory the process's peak RSS, data included.
-Beside each, in the same run, a plain numpy Gauss-Newton (vectorised FK and geometric
-Jacobian columns, column scaling, lstsq on the whole Jacobian: `bench_identify`) in a new
-process of its own, since the machine is shared and a lone time means little. casecal's
-fit does more (identifiability, rounds, audit, covariance); the reference only iterates.
+Compared, at 1e4, 1e5 and 1e6 poses (``--sizes``): `casecal.identify` (PUMA 560, uniform
+poses, deviations of 0.1 mm / 0.01° on the identifiable theta/a/d/alpha, sigma 0.02 mm,
+the default method, everything it does: rounds, identifiability, audit, covariance)
+against `fair_reference.fair_gauss_newton` (numpy; frame vectors; JᵀJ and Jᵀr summed over
+batches of 16,384 poses; column scaling; Cholesky; one BLAS thread) estimating the SAME
+parameters: the ones casecal estimated in an untimed first run on the same data (which
+also compiles and caches the kernels, so no timed run compiles). Each timed run is a fresh
+subprocess that loads the saved data and fits once; casecal's and the reference's runs
+alternate A B A B for ``--repeat`` rounds (`_timing.interleave`), because the machine is
+shared. Reported per size: CPU s (the child's user + system time, imports and data loading
+included, from RUSAGE_CHILDREN) and wall s, median and min; the fit alone (CPU by the
+child's `time.process_time`, every thread); the child's peak RSS (data and imports
+included) and its RSS before the fit; ratios casecal / fair; and the largest difference
+between the two answers.
 
-Then 1,000 poses: the best and median of repeated fits idle, and again beside two busy
-processes (numpy matrix products with the default BLAS threads, as other work on the
-machine would run).
+Targets (issue 23): at 1e6 poses, casecal's CPU <= 1.0x the fair reference's and its peak
+memory <= 1.5x. (At 1,000 poses: `bench_identify.py`.)
 
-Without a C compiler (``CASECAL_BACKEND=numpy``) the same fit evaluates the CasADi
-instruction lists with numpy, vectorised over the poses.
+Optional rows (not the reference): ``--old`` the old lstsq reference that holds the whole
+3N x k Jacobian (`bench_identify.numpy_gauss_newton`, sizes <= 1e5; it estimates the
+nominal robot's base set, as its zero columns there break its scaling, so its answer is
+not casecal's), ``--no-compiler``
+casecal with CASECAL_BACKEND=numpy (sizes <= 1e5), ``--casecal-threads 1`` casecal with
+its kernel threads off (CASECAL_THREADS=1). ``--busy``: then 1,000 poses, repeated fits
+idle and beside two busy processes (target busy/idle <= 1.5x; issue 13).
 
-Targets (issue 13): 1e6 poses <= 5 s and <= 1 GiB for theta/a/d/alpha, "all" <= 10 s and
-<= 1 GiB; at 1e5, casecal <= 0.5x the numpy reference; 1,000 poses busy <= 1.5x idle. The
-no-compiler target (evaluation <= 2x numpy at 1e4) is `bench_jacobian.py`'s; the whole
-no-compiler fit is shown here beside the numpy reference for what a user would wait.
-
-Run: python benchmarks/bench_scale.py [--sizes 1e4 1e5 1e6] [--numpy-max 1e6] [--no-busy]
+Run: python benchmarks/bench_scale.py [--sizes 1e4 1e5 1e6] [--repeat 3] [--old]
+     [--no-compiler] [--casecal-threads N] [--busy]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -36,10 +41,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_identify import numpy_gauss_newton
+from _timing import Command, interleave, peak_rss_mib, report
 
 DH = ["theta*", "a*", "d*", "alpha*"]
 SIGMA = 0.02e-3
+FAIR = "fair GN"
 
 
 def make_data(n: int, folder: str) -> str:
@@ -60,42 +66,59 @@ def make_data(n: int, folder: str) -> str:
     return path
 
 
-def child(what: str, data: str) -> None:
+def child(what: str, data: str, names: str | None) -> None:
+    """One fit in this fresh process; ends with `_timing.report`."""
+    t0 = time.perf_counter()
     f = np.load(data)
     q, y = f["q"], f["y"]
-    if what == "numpy":
+    if what in ("fair", "old"):
         from threadpoolctl import threadpool_limits
 
-        names = [str(n) for n in f["names"]]
-        with threadpool_limits(1):  # as fast as its default threads here, and fair
-            t0 = time.perf_counter()
-            numpy_gauss_newton(*f["nominal"], q, y, names)
-            t = time.perf_counter() - t0
-        ok = "-"
+        nominal = f["nominal"]
+        # the old reference divides by zero columns: it gets the nominal robot's base set
+        names = names.split(",") if names else [str(n) for n in f["names"]]
+        if what == "fair":
+            from fair_reference import fair_gauss_newton as solve
+        else:
+            from bench_identify import numpy_gauss_newton as solve
+        load = time.perf_counter() - t0
+        rss0 = peak_rss_mib()
+        with threadpool_limits(1):
+            t0, c0 = time.perf_counter(), time.process_time()
+            x, its = solve(*nominal, q, y, names)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        extra = {"rounds": 1, "success": True}
     else:
-        t0 = time.perf_counter()
         import casecal as cc
-        from casecal.identification import fit
 
-        for module in ("scipy.linalg", "scipy.special", "scipy.spatial"):  # fit imports them
-            __import__(module)
-        imports = time.perf_counter() - t0
+        load = time.perf_counter() - t0
+        rss0 = peak_rss_mib()
         robot = cc.load_robot("puma560")
         meas = cc.Measurements(q=q, positions=y, sigma=SIGMA)
-        t0 = time.perf_counter()
-        cal = fit.identify(robot, meas, DH if what == "dh" else "all")
-        t = time.perf_counter() - t0
-        ok = "ok" if cal.success else "FAILED"
-        print(f"imports {imports:.2f} s, {cal.iterations} iterations, {cal.rounds} rounds")
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB -> MiB
-    print(f"{t} {rss} {ok}")
+        t0, c0 = time.perf_counter(), time.process_time()
+        cal = cc.identify(robot, meas, DH)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        names = list(cal.estimated)
+        x = [cal.deviations[n] for n in names]
+        its = cal.iterations
+        extra = {"rounds": cal.rounds, "success": bool(cal.success)}
+    report(
+        fit_wall=wall,
+        fit_cpu=cpu,
+        load_s=load,
+        rss_before_mib=rss0,
+        names=names,
+        x=[float(v) for v in x],
+        iterations=int(its),
+        **extra,
+    )
 
 
-def run_child(what: str, data: str, backend: str = "auto") -> tuple[float, float, str]:
-    cmd = [sys.executable, __file__, "--child", what, "--data", data]
-    env = {**os.environ, "CASECAL_BACKEND": backend}
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env).stdout.split()
-    return float(out[-3]), float(out[-2]), out[-1]
+def command(what: str, data: str, names=None, **env) -> Command:
+    argv = [sys.executable, __file__, "--child", what, "--data", data]
+    if names is not None:
+        argv += ["--names", ",".join(names)]
+    return Command(argv, env)
 
 
 def busy_ratio(repeat: int) -> None:
@@ -148,53 +171,84 @@ def busy_ratio(repeat: int) -> None:
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--sizes", nargs="+", type=float, default=[1e4, 1e5, 1e6])
-    parser.add_argument("--numpy-max", type=float, default=1e6, help="largest numpy run")
-    parser.add_argument("--repeat", type=int, default=10, help="fits per busy/idle time")
-    parser.add_argument("--no-busy", action="store_true")
+    parser.add_argument("--repeat", type=int, default=3, help="interleaved rounds per size")
+    parser.add_argument("--old", action="store_true", help="also the old lstsq reference")
+    parser.add_argument("--no-compiler", action="store_true", help="also CASECAL_BACKEND=numpy")
+    parser.add_argument("--casecal-threads", help="CASECAL_THREADS for casecal's runs")
+    parser.add_argument("--busy", action="store_true", help="also the busy/idle test")
+    parser.add_argument("--busy-repeat", type=int, default=10, help="fits per busy/idle time")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--data", help=argparse.SUPPRESS)
+    parser.add_argument("--names", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        return child(args.child, args.data)
+        return child(args.child, args.data, args.names)
     # the data and this run's kernels go away with the run, however it ends
     with tempfile.TemporaryDirectory(prefix="casecal-bench-scale-") as folder:
-        os.environ.setdefault("CASECAL_CACHE", str(Path(folder) / "kernels"))
+        os.environ["CASECAL_CACHE"] = str(Path(folder) / "kernels")
+        os.environ.pop("CASECAL_BACKEND", None)
         _run(args, folder)
-        if not args.no_busy:
-            busy_ratio(args.repeat)
+        if args.busy:
+            busy_ratio(args.busy_repeat)
 
 
 def _run(args, folder: str) -> None:
-    """The pose-count table (module doc), its data and kernels in `folder`."""
-    print("PUMA 560, sigma 0.02 mm, Gauss-Newton; each fit a new process (time: s, peak RSS: MiB)")
+    """The table of each pose count (module doc), its data and kernels in `folder`."""
+    cc_env = {"CASECAL_THREADS": args.casecal_threads} if args.casecal_threads else {}
     print(
-        f"{'poses':>9} | {'theta/a/d/alpha':>17} | {'all':>17} | {'numpy GN':>15} | ratio | "
-        f"{'no compiler':>17} | ratio"
+        f"PUMA 560, sigma 0.02 mm, theta/a/d/alpha, {args.repeat} interleaved rounds per size;"
+        " each fit a fresh process"
     )
-    # compile the kernels once, outside the timings: the data of 1e4 poses and more need
-    # the same ones (two rounds), smaller sets may settle in one round with others
-    warm = make_data(10000, folder)
-    for what in ("dh", "all"):
-        for backend in ("auto", "numpy"):
-            run_child(what, warm, backend)
+    verdicts = []
     for n in (int(s) for s in args.sizes):
         data = make_data(n, folder)
-        t_dh, m_dh, ok_dh = run_child("dh", data)
-        t_all, m_all, ok_all = run_child("all", data)
-        t_np, m_np = (run_child("numpy", data)[:2]) if n <= args.numpy_max else (np.nan, np.nan)
-        # without a C compiler: the instruction lists evaluated by numpy
-        t_nc, m_nc, ok_nc = run_child("dh", data, "numpy") if n <= 1e5 else (np.nan, np.nan, "")
+        first = command("casecal", data, **cc_env)()  # untimed: compiles, and gives the set
+        names = first.result["names"]
+        runs = {
+            "casecal": command("casecal", data, **cc_env),
+            FAIR: command("fair", data, names),
+        }
+        if args.old and n <= 1e5:
+            runs["old lstsq, base set"] = command("old", data)
+        if args.no_compiler and n <= 1e5:
+            runs["casecal no compiler"] = command("casecal", data, CASECAL_BACKEND="numpy")
+        t = interleave(runs, args.repeat)
+        print(f"\n{n:,} poses: {len(names)} parameters estimated ({', '.join(names)})")
+        print(t.table(FAIR, title="  whole process (imports, data loading, fit):"))
+        x_ref = np.array(t.samples[FAIR][0].result["x"])
+        print("  the fit alone, and the answers:")
         print(
-            f"{n:9d} | {t_dh:6.2f} s {m_dh:5.0f} {ok_dh:>2} | {t_all:6.2f} s {m_all:5.0f} "
-            f"{ok_all:>2} | {t_np:6.2f} s {m_np:5.0f} | {t_dh / t_np:4.2f}x | "
-            f"{t_nc:6.2f} s {m_nc:5.0f} {ok_nc:>2} | {t_nc / t_np:4.2f}x"
+            f"  {'':<20} | {'fit CPU med':>11} {'min':>7} | {'fit wall med':>12} {'min':>7} | "
+            f"{'CPU ratio':>9} | {'RSS before':>10} | {'iterations':>10} | {'max |x - fair|':>14}"
         )
+        ref_cpu = np.median([s.result["fit_cpu"] for s in t.samples[FAIR]])
+        for name, samples in t.samples.items():
+            r = [s.result for s in samples]
+            cpu = [v["fit_cpu"] for v in r]
+            wall = [v["fit_wall"] for v in r]
+            diff = max(
+                float(np.abs(np.array(v["x"]) - x_ref).max()) if v["names"] == names else np.inf
+                for v in r
+            )
+            its = "/".join(
+                sorted({f"{v['iterations']}" + ("" if v["success"] else "!") for v in r})
+            )
+            print(
+                f"  {name:<20} | {np.median(cpu):11.3f} {min(cpu):7.3f} | {np.median(wall):12.3f}"
+                f" {min(wall):7.3f} | {np.median(cpu) / ref_cpu:8.2f}x | "
+                f"{np.median([v['rss_before_mib'] for v in r]):7.0f} MiB | {its:>10} | {diff:14.1e}"
+            )
+        if n >= 1e6:
+            cpu_ratio = t.stat("casecal", "cpu") / t.stat(FAIR, "cpu")
+            fit_ratio = np.median([s.result["fit_cpu"] for s in t.samples["casecal"]]) / ref_cpu
+            mem_ratio = t.stat("casecal", "rss") / t.stat(FAIR, "rss")
+            verdicts.append(
+                f"  {n:,} poses: CPU {cpu_ratio:.2f}x (fit alone {fit_ratio:.2f}x), target "
+                f"<= 1.0x; peak memory {mem_ratio:.2f}x, target <= 1.5x"
+            )
         Path(data).unlink()
-    print(
-        "  ratios: casecal theta/a/d/alpha time / numpy time (target <= 0.5x at 1e5); whole "
-        "fit without a compiler (CASECAL_BACKEND=numpy) / numpy (no target: the evaluation's"
-        " target, <= 2x numpy at 1e4, is bench_jacobian.py's)"
-    )
+    print("\ntargets (issue 23): casecal / fair GN at 1e6 poses, medians")
+    print("\n".join(verdicts) or "  (no size of 1e6 poses or more was run)")
 
 
 if __name__ == "__main__":
