@@ -27,10 +27,13 @@ FOLD_RUNS = 4
 """Runs of batches a pass over the poses (QR or normal equations) evaluates and reduces
 independently, as many at once as there are cores."""
 
-MEMO = 10
-"""Bytes of evaluations a memo keeps, in units of the measured points' (N · 3m doubles):
-ten point evaluations, a fit's start, its solver's trial points and where it ends, so that
-the audit finds the start and the end again (fewer of the larger poses, with orientations)."""
+MEMO = 5
+"""Bytes of evaluations a memo keeps, in units of one evaluation of what is measured (the
+points, N · 3m doubles, and with orientations also the poses, N · 16): the fit's start, its
+solver's point and trial point, and where it ends, so that the audit finds the start and
+the end again. Ten units of the points alone took the same passes over 2e5 positions with
+a peak of 19.7 point arrays, where five take 15.5 (4 fewer arrays of 24 MB at 1e6 poses);
+four cost a pass more."""
 
 MEMO_SMALL = 64
 """Reductions and normal equations (O(k²) each) a memo keeps."""
@@ -100,7 +103,8 @@ class Problem:
         self.p0 = robot.vector()
         self.R = orientations
         self.w_rot = float(w_rot)
-        self.w_rows = np.tile(w, (1, self.m))  # (N, rows per pose)
+        # (N, rows per pose); one point: w itself, not a copy of it per problem
+        self.w_rows = np.asarray(w, dtype=float) if self.m == 1 else np.tile(w, (1, self.m))
         if orientations is not None:
             self.w_rows = np.hstack([self.w_rows, np.full((n, 3), self.w_rot)])
         self.w_flat = self.w_rows.ravel()
@@ -173,7 +177,8 @@ class Problem:
     def _make_room(self, value) -> None:
         """Evict the least recently used entries of `value`'s size (`MEMO`, `MEMO_SMALL`)."""
         if isinstance(value, np.ndarray):
-            budget = MEMO * self.y.nbytes
+            unit = self.y.nbytes + (0 if self.R is None else 16 * self.y.itemsize * len(self.q))
+            budget = MEMO * unit
             large = [(k, v.nbytes) for k, v in self._memo.items() if isinstance(v, np.ndarray)]
             total = value.nbytes + sum(size for _, size in large)
             for key, size in large:

@@ -50,8 +50,9 @@ class FitFrame:
         return bool(np.array_equal(self.R, np.eye(3)) and not self.t.any())
 
     def points_in(self, y: np.ndarray) -> np.ndarray:
-        """Instrument-frame points (..., 3) expressed in the fit frame, m."""
-        return (y - self.t) @ self.R
+        """Instrument-frame points (..., 3) expressed in the fit frame, m (`y` itself in
+        the identity frame: no copy of a million points)."""
+        return y if self.is_identity else (y - self.t) @ self.R
 
     def rotations_in(self, R_meas: np.ndarray | None) -> np.ndarray | None:
         """Measured rotations (N, 3, 3) expressed in the fit frame."""
