@@ -69,6 +69,7 @@ def _variance(problem: Problem, cost: float) -> float:
 
 def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
+    crawling = False  # the last full step was too long: the next one likely is too
     for it in range(1, max_iterations + 1):
         linear = problem.reduced(x, r, exact=False)
         step, predicted = gauss_newton_step(linear)
@@ -76,12 +77,14 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
         t = 1.0
         while True:  # halve the step until the cost goes down (damped Gauss-Newton)
             x_new = x + t * step
-            # a full step not yet converged is usually taken: its Jacobian comes too
-            r_new = problem.residual(x_new, ahead=t == 1.0 and not done)
+            # a full step not yet converged is usually taken: its Jacobian comes too, but
+            # not along a curved valley, where full steps overshoot one after another
+            r_new = problem.residual(x_new, ahead=t == 1.0 and not done and not crawling)
             cost_new = 0.5 * r_new @ r_new
             if cost_new < cost or t < 1e-3 or done:
                 break
             t *= 0.5
+        crawling = t < 1.0
         if cost_new < cost:
             norms = linear.norms
             small = np.linalg.norm(t * step * norms) <= tolerance * (
