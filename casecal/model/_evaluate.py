@@ -3,6 +3,16 @@ numpy over the CasADi instruction list (`casecal.model._vectorised`), else CasAD
 
 `casecal.model.kinematics.Chain.evaluate` makes one `Evaluator` per output kind and
 parameter columns and calls it on all poses at once.
+
+When to compile (backend "auto", issue 23): a kernel in the disk cache is used at once. One
+that is not is compiled only once it pays, by a ski-rental rule: until then numpy answers
+(the same bits, about four times C's time) and the seconds it spends are added to an account
+per chain and output kind; when the account reaches the kernel's estimated compile time
+(`compile_seconds`), the kernel is compiled, synchronously, and C answers from then on, as
+it does at once for that kind's later column sets. The total is then at most about twice
+the better choice in hindsight (compile at once, or never), and a single fit of a few
+hundred poses no longer waits seconds for GCC. Batches of `COMPILE_LARGE_BATCH` poses or
+more compile at once; ``CASECAL_BACKEND=c`` compiles every batch of `COMPILE_MIN_POSES`.
 """
 
 from __future__ import annotations
@@ -10,6 +20,8 @@ from __future__ import annotations
 import logging
 import os
 import threading
+import time
+import weakref
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,7 +41,8 @@ BUILDING = threading.RLock()
 """Held while a graph, Function or kernel is built: evaluations run on several threads."""
 
 COMPILE_MIN_POSES = 200
-"""Batches of at least this many poses use compiled C (when a C compiler is present)."""
+"""Batches of at least this many poses may use compiled C (when a C compiler is present):
+a cached kernel at once, else once it pays (module doc); smaller ones CasADi's evaluation."""
 
 HOT_CALLS = 100
 """Smaller batches of one chain and output kind, in one process, after which they too use
@@ -46,8 +59,46 @@ COMPILE_LARGE_BATCH = 20_000
 """Batches of at least this many poses compile even a long Function: numpy's temporaries
 then cost seconds per call."""
 
+COMPILE_SECONDS_BASE = 0.11
+"""Seconds of a kernel's compile besides its instructions (`compile_seconds`)."""
+
+COMPILE_SECONDS_PER_INSTRUCTION = 2.7e-4
+"""Seconds of a kernel's compile per instruction of its one-pose Function.
+
+With `COMPILE_SECONDS_BASE`, a least-squares line through the code generation and GCC
+times (-O3, `casecal.model._native.CFLAGS`, best of two) of 18 kernels of the rr, PUMA 560
+and UR5e (fk, position, the position, points and pose Jacobians: 251 to 5,306
+instructions, 0.24 to 1.65 s), measured on the 2-core development machine, idle, on
+2026-11-26. Every kernel lies within 25 % of the line but the rr's position (0.26 s for
+0.18 s). It is an estimate for the ski-rental rule, not a promise: a busy machine compiles
+slower, and Functions over `COMPILE_MAX_INSTRUCTIONS` grow faster than the line."""
+
 PARALLEL_POSES = 8192
 """Batches of at least twice this many poses are split over threads (`thread_map`)."""
+
+
+_SPENT: weakref.WeakKeyDictionary[Chain, dict[str, float]] = weakref.WeakKeyDictionary()
+"""Per chain and output kind: the seconds spent evaluating batches of `COMPILE_MIN_POSES`
+or more without a kernel (module doc); infinite once the kind has compiled by the rule."""
+
+_SPENT_LOCK = threading.Lock()
+
+
+def compile_seconds(function: ca.Function) -> float:
+    """The estimated seconds to generate and compile `function`'s kernel (the constants)."""
+    return COMPILE_SECONDS_BASE + COMPILE_SECONDS_PER_INSTRUCTION * function.n_instructions()
+
+
+def spent(chain: Chain, kind: str) -> float:
+    """Seconds spent on `kind` of `chain` without a kernel, towards compiling it."""
+    with _SPENT_LOCK:
+        return _SPENT.get(chain, {}).get(kind, 0.0)
+
+
+def _charge(chain: Chain, kind: str, seconds: float) -> None:
+    with _SPENT_LOCK:
+        account = _SPENT.setdefault(chain, {})
+        account[kind] = account.get(kind, 0.0) + seconds
 
 
 def write_into(out: np.ndarray, value: np.ndarray) -> np.ndarray:
@@ -58,7 +109,8 @@ def write_into(out: np.ndarray, value: np.ndarray) -> np.ndarray:
 
 
 class Evaluator:
-    """Batched evaluation of one kind of output: compiled C if possible, else CasADi."""
+    """Batched evaluation of one kind of output: compiled C when it is cached or pays (module
+    doc), else numpy over the instruction list, else CasADi."""
 
     def __init__(self, chain: Chain, kind: str, columns: tuple[int, ...]):
         self.chain, self.kind, self.columns = chain, kind, columns
@@ -99,7 +151,8 @@ class Evaluator:
             thread_map(run, list(range(parts)))
             return out
         vectorised = self._vectorised(n)
-        if vectorised is not None:  # no compiler, or a long Function: numpy over all poses
+        started = time.perf_counter()
+        if vectorised is not None:  # no kernel (yet), or no compiler: numpy over all poses
             value = vectorised(self.chain.inputs(q, p), p).reshape(n, *self.shape)
         else:
             # CasADi evaluates all N poses in one call when q has N times the expected
@@ -107,11 +160,16 @@ class Evaluator:
             # per-pose outputs
             res = np.asarray(self.function(self.chain.inputs(q, p).T, p), dtype=float)
             value = res.T.copy() if len(self.shape) == 1 else res.T.reshape(n, *self.shape)
+        if not self._native_tried and n >= COMPILE_MIN_POSES and backend_choice() == "auto":
+            _charge(self.chain, self.kind, time.perf_counter() - started)  # towards a kernel
         return value if out is None else write_into(out, value)
 
     def compiled(self, q: np.ndarray, p: np.ndarray) -> np.ndarray | None:
-        """The output by compiled C whatever the batch size, or None without a kernel."""
-        if not self._use_native(COMPILE_MIN_POSES, p.size):
+        """The output by compiled C whatever the batch size, or None without a kernel.
+
+        Compiles the kernel at once if need be (`HOT_CALLS` has counted the small batches).
+        """
+        if not self._use_native(COMPILE_MIN_POSES, p.size, at_once=True):
             return None
         out = np.empty((q.shape[0], *self.shape))
         self._native(q, p, out)
@@ -120,11 +178,23 @@ class Evaluator:
     def _key(self) -> tuple:
         return (self.chain.structure.kernel_key, self.kind, self.columns)
 
-    def _not_worth_compiling(self, n: int) -> bool:
-        """A long Function, a batch under `COMPILE_LARGE_BATCH`, no kernel cached."""
+    def _compile_now(self, n: int, at_once: bool = False) -> bool:
+        """Backend "auto", no kernel tried yet: whether to load or build it for this batch.
+
+        A cached kernel, or a batch of `COMPILE_LARGE_BATCH` poses: yes. A Function longer
+        than `COMPILE_MAX_INSTRUCTIONS`: no. Else yes `at_once`, or once numpy's seconds on
+        this chain's kind reach the kernel's compile time (module doc).
+        """
         if n >= COMPILE_LARGE_BATCH or _native.is_cached(self._key()):
-            return False
-        return self.function.n_instructions() > COMPILE_MAX_INSTRUCTIONS
+            return True
+        function = self.function
+        if function.n_instructions() > COMPILE_MAX_INSTRUCTIONS:
+            return False  # numpy for now; a large batch may still compile it
+        if at_once or spent(self.chain, self.kind) >= compile_seconds(function):
+            with _SPENT_LOCK:  # the kind's later column sets compile at once
+                _SPENT.setdefault(self.chain, {})[self.kind] = float("inf")
+            return True
+        return False
 
     def _vectorised(self, n: int):
         """The numpy evaluator of the instruction list (`_vectorised`) where it serves."""
@@ -141,12 +211,12 @@ class Evaluator:
                     self._vectorised_tried = True
         return self._vectorised_fn
 
-    def _use_native(self, n: int, n_p: int) -> bool:
+    def _use_native(self, n: int, n_p: int, at_once: bool = False) -> bool:
         backend = backend_choice()
         if backend in ("casadi", "numpy") or (backend == "auto" and n < COMPILE_MIN_POSES):
             return False
-        if not self._native_tried and backend == "auto" and self._not_worth_compiling(n):
-            return False  # numpy for now; a large batch may still compile it
+        if not self._native_tried and backend == "auto" and not self._compile_now(n, at_once):
+            return False  # numpy for now, its seconds counted towards the compile
         if not self._native_tried:
             with BUILDING:  # set "tried" only once the kernel (or None) is in place
                 if not self._native_tried:
