@@ -5,14 +5,17 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from ..model.parameters import UNITS, unit
 from ..model.robot import Robot
 from .analysis import Observability, Representation
 from .audit import Audit
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 # casecal statuses, one table for every method (scipy style: success = status > 0)
 STATUS_MESSAGES = {
@@ -332,6 +335,8 @@ class Calibration:
         A row whose estimate stands for a combination gives that combination's value,
         interval and truth; a held row has no interval and no error.
         """
+        import pandas as pd  # only here: `identify` need not load it
+
         if self.sigma_known:
             z = 1.959963984540054  # the standard normal's 97.5 % quantile
         else:

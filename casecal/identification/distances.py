@@ -15,9 +15,7 @@ from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
-import pandas as pd
 
-from ..data.files import _numbers, read_joints, read_table
 from ..data.units import distances_at_the_door
 from ..design.poses import rng_from
 from ..errors import CalibrationError
@@ -131,6 +129,8 @@ def simulate_distances(true_robot: Robot, q, pairs, noise=0.0, seed=None) -> Dis
 def read_distance_csv(poses_path, pairs_path, robot: Robot) -> DistanceMeasurements:
     """Read poses (joint columns as in `casecal.read_csv`) and pairs (``i, j, distance_mm``,
     optional ``sigma_mm``; i and j are 0-based rows of the poses file)."""
+    from ..data.files import _numbers, read_joints, read_table  # pandas: files only
+
     poses_df, poses_label = read_table(poses_path)
     q = read_joints(poses_df, robot, poses_label)
     df, label = read_table(pairs_path)
@@ -146,6 +146,8 @@ def read_distance_csv(poses_path, pairs_path, robot: Robot) -> DistanceMeasureme
 
 def write_distance_csv(pairs_path, measurements: DistanceMeasurements) -> None:
     """Write the pairs file (i, j, distance_mm, sigma_mm)."""
+    import pandas as pd
+
     from ..data.files import write_atomic
 
     df = pd.DataFrame(

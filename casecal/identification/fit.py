@@ -27,7 +27,6 @@ from functools import partial
 from numbers import Real
 
 import numpy as np
-import pandas as pd
 
 from .._threads import with_one_blas_thread
 from ..data.measurements import Measurements, broadcast_sigma
@@ -474,8 +473,9 @@ def _orientation_weight(measurements: Measurements, orientation_sigma, known, w)
 
 def _repeats(q: np.ndarray, y: np.ndarray) -> str:
     """A note when rows repeat earlier ones exactly (a file pasted twice), else ""."""
-    # only rows whose first joint value repeats can repeat: a hash, not a sort of all rows
-    again = pd.Series(q[:, 0]).duplicated(keep=False).to_numpy()
+    # only rows whose first joint value repeats can repeat: those are compared whole
+    _, first, count = np.unique(q[:, 0], return_inverse=True, return_counts=True)
+    again = count[first] > 1
     rows = np.hstack([q[again], y[again].reshape(int(again.sum()), y[0].size)])
     n = len(rows) - len(np.unique(rows, axis=0))
     if not n:

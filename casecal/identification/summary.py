@@ -6,12 +6,15 @@ No timestamp and no mutation: the same result gives the same text.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from ..model.parameters import poorly_text, sizes_text
 from .calibration import Calibration, Summary
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 WIDTH = 96
 CONDITION_WARNING = 1e3
