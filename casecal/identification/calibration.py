@@ -376,6 +376,20 @@ class Calibration:
             rows.append(row)
         return pd.DataFrame(rows)
 
+    def to_dict(self) -> dict:
+        """This result as one JSON-ready dict, units in the key names
+        (`casecal.identification.result_dict.calibration_dict`; keys in the README)."""
+        from .result_dict import calibration_dict
+
+        return calibration_dict(self)
+
+    def residual_table(self) -> pd.DataFrame:
+        """One row per measured point: pose, error before and after in mm, outlier flag
+        (`casecal.identification.result_dict.residual_rows`)."""
+        from .result_dict import residual_rows
+
+        return residual_rows(self)
+
     def summary(self) -> Summary:
         """A readable report: header, parameter table (mm, deg), observability, notes."""
         from .summary import build_summary
