@@ -29,6 +29,7 @@ _PUBLIC = {
     "calibrate_until": "design.campaign",
     "compare_models": "identification.compare",
     "compensate": "model.compensate",
+    "compensate_program": "programs",
     "identify": "identification.fit",
     "load_robot": "model.catalog",
     "observability": "identification.analysis",

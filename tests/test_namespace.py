@@ -20,6 +20,7 @@ DOCUMENTED = {
     "observability",
     "save_robot",
     "compensate",
+    "compensate_program",
     "compare_models",
     "CameraSetup",
     "Intrinsics",
@@ -47,6 +48,7 @@ def test_dir_lists_the_public_names_and_nothing_else():
 def test_every_public_name_loads():
     for name in cc.__all__:
         assert getattr(cc, name) is not None
+    assert cc.compensate_program.__module__ == "casecal.programs"
 
 
 def test_unknown_names_and_old_module_paths_are_gone():
