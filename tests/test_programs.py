@@ -276,6 +276,28 @@ def test_rapid_module_compensated_only_its_joint_values():
     check_reached(out_q, in_q, nominal, real, result, 6 + np.log10(180 / np.pi))
 
 
+def test_rapid_statements_after_block_headers():
+    """A routine's header (no ';') before a statement does not hide the statement's
+    target; a position computed at run time is listed; reading a part of a target is no
+    assignment to it."""
+    nominal, real = abb()
+    text = (
+        "MODULE Extra\n"
+        "    PROC MoveToHome(VAR jointtarget jt)\n"
+        "        MoveAbsJ [[10,20,30,0,40,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, fine, tool0;\n"
+        "        MoveAbsJ CalcJointT(p10, tool0)\\NoEOffs, v100, fine, tool0;\n"
+        "        MoveAbsJ jt\\NoEOffs, v100, fine, tool0;\n"
+        "        IF jt.robax.rax_1 > 0 THEN\n"
+        '            TPWrite "ok";\n'
+        "        ENDIF\n"
+        "    ENDPROC\n"
+        "ENDMODULE\n"
+    )
+    result = compensate_program(real, text, "rapid", nominal=nominal)
+    assert result.changed == (3,)
+    assert result.skipped == ((4, "joint values computed at run time (CalcJointT): left as is"),)
+
+
 def test_urscript_compensated_only_its_joint_values():
     nominal, real = ur()
     check_targets(urscript, URSCRIPT, nominal, URSCRIPT_TARGETS, 1.0)
@@ -302,6 +324,8 @@ def test_csv_compensated_and_read_back_by_casecals_reader(tmp_path):
     assert [line for line, _ in result.skipped] == [4]
     assert "#" not in result.text and result.header.endswith(HEADER)  # no comment in CSV
     check_only_targets_changed(CSV, result.text, {2, 3}, 0.5)
+    marked = compensate_program(real, "\ufeff" + CSV, "csv", nominal=nominal)
+    assert marked.text == "\ufeff" + result.text  # a byte-order mark kept as it was
     assert "p2, -35.2" in result.text and '",50\r\n' in result.text
     path = tmp_path / "out.csv"
     path.write_bytes(result.text.encode())

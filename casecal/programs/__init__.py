@@ -168,6 +168,8 @@ def compensate_program(
     """
     from ..model.compensate import compensate
 
+    if fmt is None:
+        raise CalibrationError(f"give the program format: one of {', '.join(FORMATS)}")
     module = FORMATS[program_format("", fmt)]
     if hasattr(calibrated, "robot") and hasattr(calibrated, "nominal"):  # a Calibration
         nominal = calibrated.nominal if nominal is None else nominal

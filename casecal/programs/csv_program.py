@@ -45,6 +45,7 @@ def find(text: str, robot) -> Found:
     first = text[start:end]
     sep = next((d for d in ("\t", ";") if d in first and "," not in first), ",")
     header = [text[a:b].strip().strip('"') for a, b in _cells(text, start, end, sep)]
+    header[0] = header[0].lstrip("\ufeff").strip().strip('"')  # a byte-order mark kept
     joint_like = [k for k, c in enumerate(header) if _JOINT.fullmatch(c)]
     spans, values = [], []
     for line, start, end in rows[1:]:
@@ -78,7 +79,10 @@ def _rows(text: str):
         if not body.strip():
             blank = blank or line
         elif blank:
-            raise CalibrationError(f"line {blank}: a blank line between rows; delete it (casecal's CSV reader refuses it)")
+            raise CalibrationError(
+                f"line {blank}: a blank line between rows; delete it (casecal's CSV reader "
+                "refuses it)"
+            )
         else:
             yield line, offset, offset + len(body)
         offset += len(raw)

@@ -30,7 +30,7 @@ _DECL = re.compile(
     r"\b(?:CONST|PERS|VAR)\s+(jointtarget|robtarget)\s+(\w+)\s*(\{[^}]*\})?\s*(:=)?", _FLAGS
 )
 _ASSIGN = re.compile(r"(?<![\\.\w])(\w+)\s*(\{[^}]*\})?\s*:=", _FLAGS)
-_PART = re.compile(r"\.\s*(robax|extax)\b[\w.\s]*:=", _FLAGS)
+_PART = re.compile(r"\.\s*(robax|extax)\b(\s*\.\s*\w+)?\s*:=", _FLAGS)
 _MOVE_ABSJ = re.compile(r"\bMoveAbsJ\b", _FLAGS)
 _MOVE_CARTESIAN = re.compile(r"\bMove(?!AbsJ\b|ExtJ\b)\w*\b", _FLAGS)
 
@@ -54,50 +54,55 @@ def find(text: str, robot) -> Found:
     names = {
         m.group(2).lower() for m in _DECL.finditer(masked) if m.group(1).lower() == "jointtarget"
     }
+    if (part := _PART.search(masked)) is not None:
+        raise CalibrationError(
+            f"line {line_of(part.start())}: assigns part of a jointtarget at run time; "
+            "casecal compensates whole literal jointtargets only: write the whole target"
+        )
     found = Found([], [])
-    start = 0
-    for m in re.finditer(";", masked + ";"):
-        _statement(text, masked, start, m.start(), names, robot, line_of, found)
-        start = m.end()
+    seen: set[int] = set()  # values found twice (a declaration is an assignment too)
+    for at, end, kind in _values(masked, names):
+        if at is None or at in seen:
+            continue
+        seen.add(at)
+        if kind == "jointtarget":
+            _literal(text, masked, at, end, robot, line_of, found)
+        elif masked[at] == "[":
+            found.skipped.append((line_of(at), "robtarget (Cartesian): left as is"))
     found.targets.sort(key=lambda t: t.spans[0][0])
     found.skipped.sort()
     return found
 
 
-def _statement(text, masked, start, end, names, robot, line_of, found: Found) -> None:
-    """Find the targets of the statement masked[start:end] (offsets in the whole text)."""
-    s = masked[start:end]
-    if (part := _PART.search(s)) is not None:
-        raise CalibrationError(
-            f"line {line_of(start + part.start())}: assigns part of a jointtarget at run time; "
-            "casecal compensates whole literal jointtargets only: write the whole target"
-        )
-    decl = _DECL.search(s)
-    if decl:
-        if not decl.group(4):
-            return
-        value = _value_start(masked, start + decl.end(), end)
-        if decl.group(1).lower() == "robtarget":
-            if value is not None and masked[value] == "[":
-                found.skipped.append((line_of(value), "robtarget (Cartesian): left as is"))
-            return
-        _literal(text, masked, value, end, robot, line_of, found)
-        return
-    if (move := _MOVE_ABSJ.search(s)) is not None:
-        args = split_top(masked, start + move.end(), end)
-        args = [a for a in args if not masked[a[0] : a[1]].lower().startswith("\\conc")]
-        if args and masked[args[0][0]] == "[":
-            _literal(text, masked, args[0][0], end, robot, line_of, found)
-        return
-    if (move := _MOVE_CARTESIAN.search(s)) is not None:
-        args = split_top(masked, start + move.end(), end)
-        if any(masked[a] == "[" for a, _ in args[:2]):
-            found.skipped.append((line_of(args[0][0]), "robtarget (Cartesian): left as is"))
-        return
-    for m in _ASSIGN.finditer(s):
+def _values(masked: str, names: set[str]):
+    """(start, end of its statement, kind) of every value that may be a target: the
+    initial values of declarations, assignments to the file's jointtarget variables and
+    MoveAbsJ's position ("jointtarget"), literal positions of the other Move instructions
+    ("robtarget"). A statement ends at its ';' and may span lines."""
+
+    def end_of(at: int) -> int:
+        stop = masked.find(";", at)
+        return len(masked) if stop < 0 else stop
+
+    for m in _DECL.finditer(masked):
+        if m.group(4):
+            end = end_of(m.end())
+            yield _value_start(masked, m.end(), end), end, m.group(1).lower()
+    for m in _ASSIGN.finditer(masked):
         if m.group(1).lower() in names:
-            value = _value_start(masked, start + m.end(), end)
-            _literal(text, masked, value, end, robot, line_of, found)
+            end = end_of(m.end())
+            yield _value_start(masked, m.end(), end), end, "jointtarget"
+    for m in _MOVE_ABSJ.finditer(masked):
+        end = end_of(m.end())
+        args = split_top(masked, m.end(), end)
+        args = [a for a in args if not masked[a[0] : a[1]].lower().startswith("\\conc")]
+        if args:
+            yield args[0][0], end, "jointtarget"
+    for m in _MOVE_CARTESIAN.finditer(masked):
+        end = end_of(m.end())
+        literal = [a for a, _ in split_top(masked, m.end(), end)[:2] if masked[a] == "["]
+        if literal:
+            yield literal[0], end, "robtarget"
 
 
 def _value_start(masked: str, at: int, end: int) -> int | None:
@@ -107,17 +112,16 @@ def _value_start(masked: str, at: int, end: int) -> int | None:
 
 
 def _literal(text, masked, at, end, robot, line_of, found: Found) -> None:
-    """The jointtarget literal (or array of them) starting at `at`; a reference or a
-    function's value (not a literal) is listed or left alone."""
-    if at is None:
-        return
+    """The jointtarget literal (or array of them) starting at `at`; a reference (with its
+    optional switches, ``jt1\\NoEOffs``) is no target, a function's value is listed."""
     if masked[at] != "[":
         word = re.match(r"\w+", masked[at:end])
-        if word and masked[at + word.end() : end].lstrip().startswith("("):
+        rest = masked[at + (word.end() if word else 0) : end].split(",")[0].split("\\")[0]
+        if word and rest.lstrip().startswith("("):
             found.skipped.append(
                 (line_of(at), f"joint values computed at run time ({word.group()}): left as is")
             )
-        elif not (word and not masked[at + word.end() : end].strip()):
+        elif not (word and not rest.strip()):
             raise CalibrationError(
                 f"line {line_of(at)}: a jointtarget given by an expression; casecal "
                 "compensates literal jointtargets [[j1,...,j6],[e1,...,e6]] only"
