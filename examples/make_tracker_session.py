@@ -16,11 +16,12 @@ import numpy as np
 
 import casecal as cc
 from casecal.data.files import write_csv
+from casecal.model.parameters import select
 
 robot = cc.load_robot("puma560")
 rng = np.random.default_rng(2026)
 truth = {}
-for name in cc.parameters.select(robot.parameter_names, ["theta*", "d*", "a*", "alpha*"]):
+for name in select(robot.parameter_names, ["theta*", "d*", "a*", "alpha*"]):
     size = rng.uniform(0.5e-3, 1e-3) if name[0] in "ad" else np.deg2rad(rng.uniform(0.1, 0.5))
     truth[name] = rng.choice([-1, 1]) * size
 truth.update(base_x=2.1, base_y=-1.9, base_z=0.4, base_rz=np.deg2rad(130.0))

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
+from casecal.model.parameters import select
 
 DEG = np.pi / 180
 
@@ -56,7 +57,7 @@ def test_deviations_inside_the_asked_for_set_pass(sigma, seed):
     """The same check does not cry wolf when the asked-for set holds every deviation."""
     robot = cc.load_robot("puma560")
     rng = np.random.default_rng(seed)
-    names = cc.parameters.select(robot.parameter_names, ["theta*", "a*", "d*"])
+    names = select(robot.parameter_names, ["theta*", "a*", "d*"])
     truth = {n: rng.uniform(-1, 1) * (0.5e-3 if n[0] in "ad" else 0.05 * DEG) for n in names}
     true = robot.with_deviations(truth)
     q = cc.poses.uniform(robot, 100, seed=seed)
@@ -70,7 +71,7 @@ def test_deviations_inside_the_asked_for_set_pass(sigma, seed):
 def test_a_joint_that_never_moves_is_a_failure(sigma):
     robot = cc.load_robot("ur5e")
     rng = np.random.default_rng(4)
-    names = cc.parameters.select(robot.parameter_names, ["theta*", "a*", "d*", "alpha*"])
+    names = select(robot.parameter_names, ["theta*", "a*", "d*", "alpha*"])
     truth = {n: rng.uniform(-1, 1) * (0.5e-3 if n[0] in "ad" else 0.05 * DEG) for n in names}
     true = robot.with_deviations(truth)
     q = cc.poses.uniform(robot, 150, seed=5)

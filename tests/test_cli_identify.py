@@ -8,6 +8,7 @@ import pytest
 import casecal as cc
 from casecal.cli import main, parse_length
 from casecal.data.files import read_csv, write_csv
+from casecal.model.catalog import load_deviations
 
 DEVIATIONS = """\
 length_unit = "mm"
@@ -109,7 +110,7 @@ def test_simulate_identify_round_trip(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "d2 + d3 + d4" in text and "theta5" in text and "held at nominal" in text
     calibrated = cc.load_robot(out)
-    truth = cc.load_robot("scorbot").with_deviations(cc.catalog.load_deviations(dev))
+    truth = cc.load_robot("scorbot").with_deviations(load_deviations(dev))
     q = cc.poses.uniform(truth, 50, seed=3)
     # the calibrated model reproduces the true robot's positions, not just the fitted ones
     np.testing.assert_allclose(calibrated.position(q), truth.position(q), atol=1e-12)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
+from casecal.model.parameters import select
 
 DEG = np.pi / 180
 # Table 1 of the paper: the nine synthetic deviations (SI)
@@ -116,7 +117,7 @@ def test_one_shot_error_is_second_order_as_the_paper_requires():
 def test_scara_observability_names_theta4_and_vertical_offsets():
     robot = cc.load_robot("scara")
     obs = cc.observability(robot, cc.poses.seed_schedule(robot, 100))
-    assert obs.parameters == tuple(cc.parameters.select(robot.parameter_names, PAPER_SET))
+    assert obs.parameters == tuple(select(robot.parameter_names, PAPER_SET))
     # the paper: theta4 does not move the tool point, and no vertical offset d is observable
     assert {"theta4", "d1", "d2", "d3", "d4"} <= set(obs.unidentifiable)
     vertical = [s for s in obs.blind_spots if set(s.members) == {"d1", "d2", "d3", "d4"}]

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
+from casecal.model.parameters import select
 from casecal.report.studies_compliance import INERTIALS
 
 
@@ -41,7 +42,7 @@ def test_noise_without_sigma_still_passes(name):
     """Gaussian noise, σ not stated: what the smooth joint errors explain is chance."""
     robot = cc.load_robot(name)
     rng = np.random.default_rng(7)
-    names = cc.parameters.select(robot.parameter_names, ["theta*", "a*", "d*"])
+    names = select(robot.parameter_names, ["theta*", "a*", "d*"])
     true = robot.with_deviations({n: rng.normal() * 3e-4 for n in names})
     q = cc.poses.uniform(robot, 120, seed=8)
     noisy = cc.simulate(true, q, noise=0.02e-3, seed=9)
@@ -65,7 +66,7 @@ def test_measured_orientations_without_sigma_raise_no_false_alarm(seed):
     the F test, 9 of 60 correct fits failed (0.05 mm, 0.01 mrad noise)."""
     robot = cc.load_robot("puma560")
     rng = np.random.default_rng(seed)
-    names = cc.parameters.select(robot.parameter_names, ["theta*", "a*", "d*"])
+    names = select(robot.parameter_names, ["theta*", "a*", "d*"])
     true = robot.with_deviations({n: rng.normal() * 3e-4 for n in names})
     q = cc.poses.uniform(robot, 150, seed=seed)
     noisy = cc.simulate(true, q, noise=0.05e-3, seed=seed, orientation_noise=1e-5)

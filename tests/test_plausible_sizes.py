@@ -20,7 +20,7 @@ import casecal as cc
 from casecal.cli import main
 from casecal.data.files import write_csv
 from casecal.identification import rank
-from casecal.model.parameters import UNITS, checked_sizes
+from casecal.model.parameters import UNITS, checked_sizes, unit
 
 SIGMA = 1e-3
 FLOOR = math.sqrt(3) * SIGMA  # RMS of a 3-D point's noise: no model fits held-out data better
@@ -127,7 +127,7 @@ def test_default_sizes_hold_what_the_data_see(arm):
         assert "more than any real deviation (2.5 mm)" in cal.pruned[name] or (
             "more than any real deviation (0.5 °)" in cal.pruned[name]
         )
-        assert abs(arm["truth"][name]) > UNITS[cc.parameters.unit(name)].plausible
+        assert abs(arm["truth"][name]) > UNITS[unit(name)].plausible
     assert len(cal.poorly_determined) >= 5
     refit = hold_poorly_determined(cal, arm["meas"], noise=SIGMA)
     assert not refit.success

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import casecal as cc
+from casecal.model.parameters import select
 
 SIGMA = 0.02e-3  # laser tracker, per coordinate
 
@@ -15,7 +16,7 @@ def realistic_truth(robot: cc.Robot, seed: int) -> dict[str, float]:
     and an unknown tool offset."""
     rng = np.random.default_rng(seed)
     truth = {}
-    for name in cc.parameters.select(robot.parameter_names, ["theta*", "d*", "a*", "alpha*"]):
+    for name in select(robot.parameter_names, ["theta*", "d*", "a*", "alpha*"]):
         sign = rng.choice([-1.0, 1.0])
         if name[0] in "ad":
             truth[name] = sign * rng.uniform(0.5e-3, 1e-3)

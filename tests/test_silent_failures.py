@@ -19,6 +19,7 @@ import pytest
 
 import casecal as cc
 from casecal.cli import main
+from casecal.model.parameters import select
 
 DH = ["theta*", "d*", "a*", "alpha*"]
 DEG = np.pi / 180
@@ -54,7 +55,7 @@ def test_1_one_error_on_any_dh_parameter_with_the_tool_at_the_flange(name):
     robot = cc.load_robot(name)
     q = cc.poses.uniform(robot, 200, seed=3)
     q_new = cc.poses.uniform(robot, 300, seed=4)
-    names = cc.parameters.select(robot.parameter_names, DH)
+    names = select(robot.parameter_names, DH)
     for param in names[:: 1 if name == "puma560" else 3]:
         size = 0.5e-3 if param[0] in "ad" and not param.startswith("alpha") else 0.05 * DEG
         true = robot.with_deviations({param: size})
@@ -73,7 +74,7 @@ def large_deviations(robot, seed=4):
             if n[0] in "ad" and n[:5] != "alpha"
             else rng.uniform(2.5, 7.5) * DEG
         )
-        for n in cc.parameters.select(robot.parameter_names, DH)
+        for n in select(robot.parameter_names, DH)
     }
 
 
@@ -124,7 +125,7 @@ def test_3_every_pose_at_q5_zero(sigma):
     rng = np.random.default_rng(0)
     truth = {
         n: rng.uniform(-1, 1) * (0.5e-3 if n[0] in "ad" and n[:5] != "alpha" else 0.05 * DEG)
-        for n in cc.parameters.select(robot.parameter_names, [*DH, "beta*"])
+        for n in select(robot.parameter_names, [*DH, "beta*"])
     }
     truth["d5"] = -0.25e-3
     cal = cc.identify(
@@ -166,7 +167,7 @@ def test_3_every_pose_at_q5_zero(sigma):
 def test_4_blind_combinations_are_compared_as_combinations():
     robot = cc.load_robot("ur5e")
     rng = np.random.default_rng(3)
-    names = cc.parameters.select(robot.parameter_names, [*DH, "beta*"])
+    names = select(robot.parameter_names, [*DH, "beta*"])
     truth = {
         n: rng.uniform(-1, 1) * (0.5e-3 if n[0] in "ad" and n[:5] != "alpha" else 0.05 * DEG)
         for n in names
@@ -233,7 +234,7 @@ def test_6_no_outliers_at_rounding_level_and_lm_converges_on_20000_poses():
     rng = np.random.default_rng(5)
     truth = {
         n: rng.uniform(-1, 1) * (0.5e-3 if n[0] in "ad" and n[:5] != "alpha" else 0.05 * DEG)
-        for n in cc.parameters.select(robot.parameter_names, DH)
+        for n in select(robot.parameter_names, DH)
     }
     true = robot.with_deviations(truth)
     exact = cc.identify(robot, cc.simulate(true, cc.poses.uniform(robot, 300, seed=1)), "all")
