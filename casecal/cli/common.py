@@ -59,11 +59,11 @@ def add_output_switches(p: argparse.ArgumentParser, default) -> None:
         "--quiet",
         action="store_true",
         default=False if default is not argparse.SUPPRESS else default,
-        help="print only errors, warnings and what was asked for: the files written (to "
-        "standard output too, with -o /dev/stdout) and the tables of robots, show, "
-        "observability, validate and compare and of identify --holdout; drops the summaries "
-        "and 'written' lines on standard output, and the notes and progress lines on "
-        "standard error",
+        help="print only errors, warnings and what was asked for: the files written (a "
+        "pipe gets the CSV alone from simulate or compensate -o /dev/stdout) and the tables "
+        "of robots, show, observability, validate and compare and of identify --holdout. "
+        "Drops the fit summaries and 'written' lines on standard output, the report's "
+        "progress, and the notes and fit progress lines on standard error",
     )
 
 
@@ -146,7 +146,9 @@ def robot_for(args: argparse.Namespace, name: str):
     if note_text:
         note(f"casecal: note: {note_text}")
     if not str(name).lower().endswith((".urdf", ".xacro")):
-        return load_robot(name)
+        robot = load_robot(name)
+        log.info("robot %s from %s: %d joints (%s)", robot.name, name, robot.dof, robot.convention)
+        return robot
     ends = {k: getattr(args, k, None) for k in ("base_link", "tip_link")}
     tips = ends["tip_link"]
     if tips is not None and "," in tips:
@@ -158,7 +160,7 @@ def robot_for(args: argparse.Namespace, name: str):
             )
     packages = getattr(args, "packages", None)
     robot = load_robot(name, **ends, packages=dict(packages) if packages else None)
-    log.info("read %s from %s (%d joints)", robot.name, name, robot.dof)
+    log.info("robot %s from %s: %d joints (%s)", robot.name, name, robot.dof, robot.convention)
     return robot
 
 

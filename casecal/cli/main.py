@@ -69,10 +69,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("-q (quiet) and -v (verbose) ask for opposites; give one of them")
     Output.quiet, Output.verbose = bool(args.quiet), args.verbose
     level = {0: logging.WARNING, 1: logging.INFO}.get(args.verbose, logging.DEBUG)
-    logging.basicConfig(
-        level=logging.ERROR if args.quiet else level,
-        format="casecal: %(levelname)s: %(message)s",
-    )
+    level = logging.ERROR if args.quiet else level
+    logging.basicConfig(level=level, format="casecal: %(levelname)s: %(message)s")
+    logging.getLogger("casecal").setLevel(level)  # each call's own, in one process too
     warnings.showwarning = one_line_warning
     with recording() as written, sigterm_unwinds():  # written: as each file is in place
         try:
