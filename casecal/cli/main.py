@@ -19,6 +19,7 @@ from . import (
     calibrate_until,
     compare,
     compensate,
+    convert,
     identify,
     report,
     show,
@@ -27,7 +28,7 @@ from . import (
 )
 from .common import Output, add_output_switches, check_outputs, one_line_warning
 
-COMMANDS = (show, simulate, identify, calibrate_until, validate, compensate, compare)
+COMMANDS = (show, simulate, identify, calibrate_until, validate, compensate, compare, convert)
 """The command modules, in the order of ``casecal --help`` (report last)."""
 
 
