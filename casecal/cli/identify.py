@@ -21,7 +21,7 @@ from .common import (
     robot_for,
     say,
 )
-from .identify_modes import identify_camera, identify_distances
+from .identify_modes import add_modes, identify_camera, identify_distances
 from .writing import (
     add_sizes,
     check_fit,
@@ -54,6 +54,34 @@ def add_parser(sub) -> None:
         "optional session column labels the instrument's placements, each fitted with its "
         "own base frame",
     )
+    _add_fit_options(p)
+    p.add_argument(
+        "--deviations-out",
+        metavar="FILE",
+        help="write deviations and standard errors as .json or .csv",
+    )
+    add_modes(p)
+    p.add_argument(
+        "--per-session",
+        choices=("base", "base,tool"),
+        default=None,
+        help="with a session column: the frames each session has of its own (default base; "
+        "base,tool when the probe was re-mounted too)",
+    )
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="fail (exit 2, nothing written) if any asked-for parameter cannot be identified, "
+        "instead of holding it at nominal and saying so",
+    )
+    add_sizes(p)
+    add_robot_options(p)
+    p.add_argument("-o", "--output", metavar="FILE", help=ROBOT_OUT_HELP)
+    p.set_defaults(func=run)
+
+
+def _add_fit_options(p: argparse.ArgumentParser) -> None:
+    """How identify fits: method, parameters, weights, hold-out and robust loss."""
     p.add_argument(
         "--method",
         choices=METHODS,
@@ -100,54 +128,6 @@ def add_parser(sub) -> None:
         metavar="ANGLE",
         help="sigma of measured orientations (qw..qz columns), e.g. 0.01deg",
     )
-    p.add_argument(
-        "--deviations-out",
-        metavar="FILE",
-        help="write deviations and standard errors as .json or .csv",
-    )
-    p.add_argument(
-        "--pairs",
-        metavar="CSV",
-        help="relative measurements: CSV of i, j, distance_mm (0-based rows of the measurement "
-        "file, whose positions are then not needed)",
-    )
-    p.add_argument(
-        "--camera",
-        metavar="TOML",
-        help="camera calibration: the measurement file has c{k}_u_px, c{k}_v_px columns of a "
-        "checkerboard's corners per view, and this file the nominal camera, board and lens "
-        "(a [camera] table: mode, camera_xyz_mm, camera_rpy_deg, target_xyz_mm, "
-        "target_rpy_deg, fx, fy, cx, cy, distortion, image_size, board_rows, board_cols, "
-        "board_spacing_mm)",
-    )
-    p.add_argument(
-        "--sigma-px",
-        metavar="PX",
-        type=float,
-        help="with --camera: the pixel noise sigma, px (when the file has no sigma_px column)",
-    )
-    p.add_argument(
-        "--camera-out",
-        metavar="TOML",
-        help="with --camera: write the fitted camera, board pose and lens here",
-    )
-    p.add_argument(
-        "--per-session",
-        choices=("base", "base,tool"),
-        default=None,
-        help="with a session column: the frames each session has of its own (default base; "
-        "base,tool when the probe was re-mounted too)",
-    )
-    p.add_argument(
-        "--strict",
-        action="store_true",
-        help="fail (exit 2, nothing written) if any asked-for parameter cannot be identified, "
-        "instead of holding it at nominal and saying so",
-    )
-    add_sizes(p)
-    add_robot_options(p)
-    p.add_argument("-o", "--output", metavar="FILE", help=ROBOT_OUT_HELP)
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> None:

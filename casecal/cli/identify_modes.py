@@ -13,6 +13,36 @@ from .common import check_writable_dir, say
 from .writing import check_fit, check_robot_format, write_calibrated, write_outputs
 
 
+def add_modes(p: argparse.ArgumentParser) -> None:
+    """identify's --pairs, --camera, --sigma-px and --camera-out."""
+    p.add_argument(
+        "--pairs",
+        metavar="CSV",
+        help="relative measurements: CSV of i, j, distance_mm (0-based rows of the measurement "
+        "file, whose positions are then not needed)",
+    )
+    p.add_argument(
+        "--camera",
+        metavar="TOML",
+        help="camera calibration: the measurement file has c{k}_u_px, c{k}_v_px columns of a "
+        "checkerboard's corners per view, and this file the nominal camera, board and lens "
+        "(a [camera] table: mode, camera_xyz_mm, camera_rpy_deg, target_xyz_mm, "
+        "target_rpy_deg, fx, fy, cx, cy, distortion, image_size, board_rows, board_cols, "
+        "board_spacing_mm)",
+    )
+    p.add_argument(
+        "--sigma-px",
+        metavar="PX",
+        type=float,
+        help="with --camera: the pixel noise sigma, px (when the file has no sigma_px column)",
+    )
+    p.add_argument(
+        "--camera-out",
+        metavar="TOML",
+        help="with --camera: write the fitted camera, board pose and lens here",
+    )
+
+
 def identify_distances(args: argparse.Namespace, robot) -> None:
     """identify --pairs: the measurement file's rows are joined by measured distances."""
     from ..identification import distances
