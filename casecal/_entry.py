@@ -10,7 +10,7 @@ import sys
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the ``casecal`` command; exit codes as in `casecal.cli.main` (130: interrupted)."""
+    """Run the ``casecal`` command; exit codes as in `casecal.cli.main.main` (130: interrupted)."""
     try:
         from .cli import main as run
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-import casecal.cli as cli
+import casecal.cli.simulate as simulate_command
 from casecal import textio
 from casecal.cli import main
 
@@ -84,13 +84,13 @@ def test_ctrl_c_between_two_renames_lands_after_both(tmp_path, monkeypatch):
 
 
 def test_sigterm_unwinds_like_ctrl_c_with_one_line_and_exit_143(tmp_path, monkeypatch, capsys):
-    simulate = cli.simulate
+    simulate = simulate_command.simulate
 
     def simulate_then_terminated(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGTERM)  # a supervisor's `kill` during the work
         return simulate(*args, **kwargs)
 
-    monkeypatch.setattr(cli, "simulate", simulate_then_terminated)
+    monkeypatch.setattr(simulate_command, "simulate", simulate_then_terminated)
     out = tmp_path / "m.csv"
     assert main(["simulate", "rr", "--poses", "3", "-o", str(out)]) == 143
     assert capsys.readouterr().err == "casecal: terminated; nothing was written\n"

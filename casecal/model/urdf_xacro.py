@@ -38,6 +38,7 @@ def expand_xacro(path: Path, packages: dict[str, str]) -> str:
         detail = " ".join(str(exc).split())
         raise CalibrationError(
             f"{path}: xacro could not expand it ({detail}); name the ROS packages it "
-            "finds with packages={name: folder} (Python: load_robot), or run 'xacro FILE > "
-            "robot.urdf' in its workspace and load the .urdf (the command line's way)"
+            "finds with --package NAME=PATH (command line) or packages={name: folder} "
+            "(Python: load_robot), or run 'xacro FILE > robot.urdf' in its workspace and "
+            "load the .urdf"
         ) from None

@@ -1,5 +1,4 @@
-"""``casecal compensate``: corrected joint targets from a calibrated robot file (a leaf of
-the command line, kept apart from cli.py's other commands)."""
+"""``casecal compensate``: corrected joint targets from a calibrated robot file."""
 
 from __future__ import annotations
 
@@ -8,10 +7,13 @@ import io
 
 import numpy as np
 
+from .common import add_robot_options, command, robot_for, say
 
-def add_command(command) -> None:
-    """Register ``compensate`` with `command(name, **kwargs)` (cli.build_parser's helper)."""
+
+def add_parser(sub) -> None:
+    """Register ``compensate`` on the subcommand action `sub`."""
     p = command(
+        sub,
         "compensate",
         help="correct joint targets so the real robot reaches where the nominal one would",
         description="Read joint targets (columns q1_deg ... or q1 ...) that a controller "
@@ -51,17 +53,18 @@ def add_command(command) -> None:
         "arms of six or more joints: the whole pose). For a calibration from positions "
         "alone, whose tool orientation may be blind",
     )
+    add_robot_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> None:
-    from . import cli
-    from .data.files import read_joints, read_table
-    from .model.compensate import compensate
-    from .textio import write_atomic
+    """``casecal compensate``: write the corrected targets, one row per target."""
+    from ..data.files import read_joints, read_table
+    from ..model.compensate import compensate
+    from ..textio import write_atomic
 
-    calibrated = cli.robot_for(args, args.robot)
-    nominal = cli.robot_for(args, args.nominal) if args.nominal else None
+    calibrated = robot_for(args, args.robot)
+    nominal = robot_for(args, args.nominal) if args.nominal else None
     df, label = read_table(args.targets, "targets file")
     q = read_joints(df, calibrated, label)
     orientation = False if args.position_only else None
@@ -80,7 +83,7 @@ def run(args: argparse.Namespace) -> None:
     pd.DataFrame(columns).to_csv(buffer, index=False, float_format="%.17g")
     write_atomic(args.output, buffer.getvalue())
     bad = int((~result.ok).sum())
-    print(
+    say(
         f"wrote {len(q)} corrected targets to {args.output}"
         + (
             f"; {bad} could not be corrected (ok = 0, reason given; they keep the target)"

@@ -1,14 +1,17 @@
-"""``casecal compare``: which error model the data support (a leaf of the command line)."""
+"""``casecal compare``: which error model the data support (one module of `casecal.cli`)."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
 
+from .common import add_robot_options, command, robot_for
 
-def add_command(command) -> None:
-    """Register ``compare`` with `command(name, **kwargs)` (cli.build_parser's helper)."""
+
+def add_parser(sub) -> None:
+    """Register ``compare`` on the subcommand action `sub`."""
     p = command(
+        sub,
         "compare",
         help="fit nested error models and say which the data support (cross-validation)",
         description="Fit the rigid robot, then with gravity compliance (--compliance), then "
@@ -34,17 +37,18 @@ def add_command(command) -> None:
         help="add harmonics of a joint's angle up to ORDER (repeatable), e.g. 2:2",
     )
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
+    add_robot_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> None:
-    from . import cli
-    from .data.files import read_csv
-    from .errors import CalibrationError
-    from .identification.compare import compare_models
-    from .identification.lumped_select import ReducedLumped
+    """``casecal compare``: fit the nested models and print the comparison table."""
+    from ..data.files import read_csv
+    from ..errors import CalibrationError
+    from ..identification.compare import compare_models
+    from ..identification.lumped_select import ReducedLumped
 
-    robot = cli.robot_for(args, args.robot)
+    robot = robot_for(args, args.robot)
     rigid = dataclasses.replace(robot, terms=(), auto_beta=False)
     models = {"rigid": rigid}
     current = rigid

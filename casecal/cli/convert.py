@@ -1,0 +1,53 @@
+"""``casecal convert``: a robot file in another format, without refitting anything."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+from ..errors import CalibrationError
+from ..textio import write_atomic
+from .common import add_robot_options, check_writable_dir, command, robot_for, say
+from .writing import how_to_load, say_notes
+
+
+def add_parser(sub) -> None:
+    """Register ``convert`` on the subcommand action `sub`."""
+    p = command(
+        sub,
+        "convert",
+        help="write a robot file in another format (TOML, URDF, UR kinematics YAML)",
+        description="Read a robot (catalog name, .toml, .urdf, .xacro or a UR calibration "
+        ".yaml) and write it in the format OUT's extension names (.toml, .urdf, .yaml), "
+        "nothing refitted. The written text is read back and its forward kinematics "
+        "compared with the robot's at 300 poses before it replaces anything, as every "
+        "export is; a conversion that cannot be exact (a joint coupling or error terms to "
+        "URDF, a tree to a UR file, a tool a UR file cannot place) is refused, nothing "
+        "written. OUT may not be the robot file read; another existing OUT is replaced, "
+        "as by identify -o.",
+    )
+    p.add_argument("robot", metavar="IN", help="catalog name, .toml, .urdf, .xacro or .yaml path")
+    p.add_argument(
+        "out", metavar="OUT", help="file to write: .toml, .urdf or .yaml (UR kinematics)"
+    )
+    add_robot_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> None:
+    """``casecal convert``: load IN, export it checked to OUT, refuse any loss."""
+    from ..model.save import export
+
+    if not args.out.strip():
+        raise CalibrationError("the output file name is empty; give a file name as OUT")
+    robot = robot_for(args, args.robot)
+    out = export(robot, args.out)  # read back and compared before anything is written
+    if out.statement:
+        raise CalibrationError(
+            f"{args.out}: {out.statement}; not written: convert writes exact copies only "
+            "(convert to .toml, which holds everything)"
+        )
+    check_writable_dir(os.path.dirname(os.path.abspath(args.out)))
+    say_notes(args.out, out)
+    write_atomic(args.out, out.text)
+    say(f"{robot.name} written to {args.out} ({how_to_load(args.out, robot)})")
