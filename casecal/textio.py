@@ -77,7 +77,8 @@ def write_together(files) -> None:
 
     Parameters
     ----------
-    files : sequence of (path, str)
+    files : sequence of (path, str or bytes)
+        Text is written as UTF-8, bytes as they are (a PNG, a program in its own encoding).
 
     Raises
     ------
@@ -192,24 +193,26 @@ def _special(path: Path) -> bool:
     return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
 
 
-def _write_through(target: Path | int, text: str) -> None:
+def _write_through(target: Path | int, text: str | bytes) -> None:
     try:
         if isinstance(target, int):  # the descriptor as the shell opened it (>> appends)
-            data = text.encode("utf-8")
+            data = text if isinstance(text, bytes) else text.encode("utf-8")
             for stream in (sys.stdout, sys.stderr):  # what was printed before comes first
                 stream.flush()
             while data:
                 data = data[os.write(target, data) :]
             return
-        with open(target, "w", encoding="utf-8") as fh:  # a FIFO waits for its reader
-            fh.write(text)
+        binary = isinstance(text, bytes)
+        with open(target, "wb" if binary else "w", encoding=None if binary else "utf-8") as fh:
+            fh.write(text)  # a FIFO waits for its reader
     except OSError as exc:
         exc.filename = str(target) if not isinstance(target, int) else f"/dev/fd/{target}"
         raise
 
 
-def _stage(target: Path, text: str) -> str:
-    """`text` in a temporary file beside `target`, with a new file's mode; its path."""
+def _stage(target: Path, text: str | bytes) -> str:
+    """`text` (UTF-8, or bytes as they are) in a temporary file beside `target`, with a new
+    file's mode; its path."""
     try:
         fd, tmp = tempfile.mkstemp(
             prefix=f".{target.name}.casecal-{os.getpid()}-", suffix=".tmp", dir=target.parent
@@ -218,7 +221,8 @@ def _stage(target: Path, text: str) -> str:
         exc.filename = str(target)
         raise
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        binary = isinstance(text, bytes)
+        with os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8") as fh:
             fh.write(text)
         os.chmod(tmp, _mode(target))
     except OSError as exc:

@@ -7,6 +7,7 @@ import io
 
 import numpy as np
 
+from ..errors import CalibrationError
 from .common import add_robot_options, command, robot_for, say
 
 
@@ -27,8 +28,24 @@ def add_parser(sub) -> None:
         "tree's pose of it at once.",
     )
     p.add_argument("robot", metavar="CALIBRATED", help="calibrated robot file (.toml or .urdf)")
-    p.add_argument("targets", metavar="CSV", help="joint targets ('-' for standard input)")
-    p.add_argument("-o", "--output", required=True, metavar="CSV", help="file to write")
+    p.add_argument(
+        "targets", metavar="CSV", nargs="?", help="joint targets ('-' for standard input)"
+    )
+    p.add_argument(
+        "--program",
+        metavar="FILE",
+        help="a robot program instead of CSV: KUKA KRL (.src, .dat), ABB RAPID (.mod, .modx, "
+        ".prg), URScript (.script, .urscript) or a joint CSV (.csv). Its literal joint targets "
+        "are compensated in place; every other character is kept, and a header comment names "
+        "the calibration file and its hash. Targets that cannot be corrected, and Cartesian or "
+        "computed ones, are left as they were and listed",
+    )
+    p.add_argument(
+        "--format",
+        choices=("krl", "rapid", "urscript", "csv"),
+        help="the --program's format when its extension does not tell",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help="file to write")
     p.add_argument(
         "--nominal",
         metavar="ROBOT",
@@ -63,8 +80,14 @@ def run(args: argparse.Namespace) -> None:
     from ..model.compensate import compensate
     from ..textio import write_atomic
 
+    if (args.targets is None) == (args.program is None):
+        raise CalibrationError("give the joint targets: a CSV, or --program FILE (one of them)")
     calibrated = robot_for(args, args.robot)
     nominal = robot_for(args, args.nominal) if args.nominal else None
+    if args.program is not None:
+        return run_program(args, calibrated, nominal)
+    if args.format is not None:
+        raise CalibrationError("--format goes with --program")
     df, label = read_table(args.targets, "targets file")
     q = read_joints(df, calibrated, label)
     orientation = False if args.position_only else None
@@ -91,3 +114,39 @@ def run(args: argparse.Namespace) -> None:
             else ""
         )
     )
+
+
+def run_program(args: argparse.Namespace, calibrated, nominal) -> None:
+    """``casecal compensate --program``: the program with compensated targets, in its own
+    encoding (UTF-8, else Windows-1252 as KRL files often are), byte for byte elsewhere."""
+    import os
+
+    from ..programs import calibration_header, compensate_program, program_format
+    from ..textio import read_bytes, write_atomic
+
+    fmt = program_format(args.program, args.format)
+    if os.path.exists(args.output) and os.path.samefile(args.output, args.program):
+        raise CalibrationError(
+            f"-o {args.output!r} is the program read; write the compensated one beside it"
+        )
+    data = read_bytes(args.program, "program")
+    try:
+        text, encoding = data.decode("utf-8"), "utf-8"
+    except UnicodeDecodeError:
+        text, encoding = data.decode("cp1252"), "cp1252"
+    # identify writes a robot file only once its audit passed; a file without that record
+    # (calibrated_from) is not known to be a calibration
+    verdict = (
+        "passed (casecal identify wrote it after its audit)"
+        if calibrated.calibrated_from
+        else "unknown (the file records no calibration)"
+    )
+    header = calibration_header(args.robot, verdict) if os.path.isfile(args.robot) else None
+    orientation = False if args.position_only else None
+    result = compensate_program(
+        calibrated, text, fmt, nominal, header=header, frame=args.frame, orientation=orientation
+    )
+    write_atomic(args.output, result.text.encode(encoding))
+    say(f"wrote {args.output}: {len(result.changed)} target(s) compensated")
+    for line, reason in result.skipped:
+        say(f"  line {line} left as it was: {reason}")

@@ -10,6 +10,7 @@ from ..errors import CalibrationError
 from ..identification.fit import DEFAULT_METHOD, METHODS, identify
 from ..identification.validation import split, validate
 from ..model.catalog import load_deviations
+from ..textio import write_together
 from .common import (
     PARAMS_HELP,
     ROBOT_OUT_HELP,
@@ -60,6 +61,7 @@ def add_parser(sub) -> None:
         metavar="FILE",
         help="write deviations and standard errors as .json or .csv",
     )
+    _add_result_options(p)
     add_modes(p)
     p.add_argument(
         "--per-session",
@@ -78,6 +80,53 @@ def add_parser(sub) -> None:
     add_robot_options(p)
     p.add_argument("-o", "--output", metavar="FILE", help=ROBOT_OUT_HELP)
     p.set_defaults(func=run)
+
+
+def _add_result_options(p: argparse.ArgumentParser) -> None:
+    """--json, --residuals, --plot: the result for scripts and for the eye, written
+    whether or not the fit passed (they say so), before -o's check."""
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="write the whole result as one JSON object (keys in the README: verdict, "
+        "errors in mm, each parameter in its unit, audit checks); '/dev/stdout' for a pipe",
+    )
+    p.add_argument(
+        "--residuals",
+        metavar="CSV",
+        help="write one row per measured point: pose, error before and after in mm, outlier",
+    )
+    p.add_argument(
+        "--plot",
+        metavar="PNG",
+        help="draw the residuals: by pose, their distribution, by joint value; the poses that "
+        "stand out marked",
+    )
+
+
+def _result_files(args: argparse.Namespace, cal, q) -> list:
+    """(path, text or bytes) of --json, --residuals and --plot."""
+    files = []
+    if args.json:
+        import json
+
+        files.append((args.json, json.dumps(cal.to_dict(), indent=2, allow_nan=False) + "\n"))
+    if args.residuals:
+        table = cal.residual_table()
+        files.append((args.residuals, table.to_csv(index=False, float_format="%.9g")))
+    if args.plot:
+        import io
+
+        from ..report.common import plt
+        from ..report.residual_plot import residual_figure
+
+        figure, buffer = residual_figure(cal, q), io.BytesIO()
+        try:
+            figure.savefig(buffer, format="png", dpi=150)
+        finally:
+            plt.close(figure)
+        files.append((args.plot, buffer.getvalue()))
+    return files
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -133,6 +182,13 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> None:
     """``casecal identify``: fit, print the summary, write what -o and the others name."""
     robot = with_sizes(robot_for(args, args.robot), args)
+    asked = [f for f, v in (("--json", args.json), ("--residuals", args.residuals),
+                            ("--plot", args.plot)) if v]  # fmt: skip
+    if asked and (args.camera or args.pairs):
+        raise CalibrationError(
+            f"{', '.join(asked)} are for measured points; with --camera or --pairs, use "
+            "--deviations-out and the printed summary"
+        )
     if args.camera:
         return identify_camera(args, robot)
     for flag, value in (("--sigma-px", args.sigma_px), ("--camera-out", args.camera_out)):
@@ -160,7 +216,7 @@ def run(args: argparse.Namespace) -> None:
             )
         return identify_distances(args, robot)
     meas = read_csv(args.measurements, robot)
-    for out in (args.output, args.deviations_out):
+    for out in (args.output, args.deviations_out, args.json, args.residuals, args.plot):
         if out is not None and not out.strip():
             raise CalibrationError("an output file name is empty; give a file name")
         if out:  # fail before the work, not after it
@@ -194,6 +250,10 @@ def run(args: argparse.Namespace) -> None:
     if progress is not None:
         progress.end()  # a terminal's rewritten line
     say(cal.summary())
+    results = _result_files(args, cal, meas.q)
+    if results:  # a failed fit's too: they describe it, they are no calibration
+        write_together(results)
+        say("result written to " + ", ".join(path for path, _ in results))
     check_fit(cal, args.strict, "poses")
     cal = without_poorly_determined(cal, meas, options, args.strict)
     # what was asked to be written is written as soon as the fit is good
