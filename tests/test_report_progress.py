@@ -61,6 +61,18 @@ def test_progress_lines_without_a_terminal(monkeypatch, tmp_path):
     assert steps[-1].startswith("study 2/2 a long study: 40/40 tasks (100 %)")
 
 
+def test_progress_says_when_a_map_ends(monkeypatch):
+    clock = _Clock()
+    monkeypatch.setattr(report.time, "perf_counter", clock)
+    err = io.StringIO()
+    progress = Progress(stream=err)
+    progress.start(1, 1, "x")
+    for done in range(1, 49):  # 48 tasks: steps of 5 end at 45; the end is said too
+        clock.now += 10.0
+        progress(done, 48)
+    assert err.getvalue().splitlines()[-1] == "study 1/1 x: 48/48 tasks (100 %), 480 s"
+
+
 def test_progress_bar_on_a_terminal_is_labelled(monkeypatch, tmp_path):
     clock = _Clock()
     _fake_studies(monkeypatch, clock)

@@ -134,7 +134,7 @@ class Progress:
         if total != self._total or done <= self._done:
             self._total, self._next = total, step  # a new map over other tasks
         self._done = done
-        if done >= self._next:
+        if done >= self._next or done == total:
             self._next = (done // step + 1) * step
             elapsed = time.perf_counter() - self.t0
             if elapsed >= self.quiet:
