@@ -82,3 +82,15 @@ def test_failed_fits_are_drawn_apart():
     assert drawn["passed"].empty
     assert ax2.get_legend_handles_labels()[1] == ["DH: failed audit"]
     plt.close(fig)
+
+
+def test_a_figure_shrunk_to_fit_stays_on_the_page(tmp_path):
+    """Sized to the room left, a figure is not pushed to a new page by rounding."""
+    caption = "A caption of a few words. " * 8
+    figures = [
+        Figure(_png(tmp_path / "a.png", 3.5), "short", caption),
+        Figure(_png(tmp_path / "b.png", 6.0), "tall, shrunk", caption),
+    ]
+    layout = Layout()
+    write_pdf(tmp_path / "r.pdf", "t", ["x"], [StudyResult("s", "s", figures)], set(), layout)
+    assert len(layout.filled) == 1 and layout.filled[0] > 0.99, layout.filled

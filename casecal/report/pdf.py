@@ -46,7 +46,7 @@ class _Flow:
 
     def place(self, height: float):
         """The figure and the top (fraction) of a free band of `height`."""
-        if self.fig is None or self.y - height < MARGIN:
+        if self.fig is None or self.y - height < MARGIN - 1e-9:  # rounding: a block sized to fit
             self.close()
             self.fig, self.y = plt.figure(figsize=A4), 1 - MARGIN
         top = self.y
