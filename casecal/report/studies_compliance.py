@@ -114,7 +114,8 @@ def compliance_study(out: Path, quick: bool = False, run=None) -> StudyResult:
     pose_axis(ax, counts)
     ax.set_xlabel("number of poses N")
     ax.set_ylabel("held-out RMS position error (mm)")
-    ax.legend(fontsize=7)
+    # beside the axes: failed fits may lie anywhere inside
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     big = med.loc[max(counts)]
     known = df[(df.model == "compliance, masses known") & (df.n_poses == max(counts))]
     rel = {n: float(np.max(np.abs(known[f"{n}_estimate"] / v - 1))) for n, v in COMPLIANCE.items()}
