@@ -2,6 +2,9 @@
 
 Figures and tables flow down A4 portrait pages: a block (heading, content, caption) goes
 below the previous one when it fits, else on a new page, so no page is left mostly blank.
+A figure shrinks (to 65 % at most) rather than leave a page half empty, and where the next
+block does not fit, one of the two after it that does fills the page first; blocks are
+numbered in the order they appear. Titles wrap at the measured width between the margins.
 """
 
 from __future__ import annotations
@@ -137,7 +140,8 @@ class _Block:
             df = item.shown if item.shown is not None else item.frame
             self.frame = df.head(MAX_ROWS)
             self.image = table_height(self.frame, A4)
-        self.rest = _heading_height(self.heading(0)) + 0.01 + _caption_height(item.caption)
+        # sized for a two-digit number: the title may wrap one word earlier than with one
+        self.rest = _heading_height(self.heading(99)) + 0.01 + _caption_height(item.caption)
 
     def heading(self, number: int) -> str:
         return f"{self.kind} {number}. {self.item.title}"
