@@ -301,9 +301,10 @@ def six_axis(out: Path, quick: bool = False, run=None) -> StudyResult:
         pose_axis(ax, counts)
     axes[0].set_ylabel("held-out RMS position error (mm)")
     handles = {h.get_label(): h for a in axes for h in a.get_legend_handles_labels()[0]}
+    order = sorted(handles, key=lambda k: k.endswith("failed audit"))  # passed fits first
     fig.legend(
-        handles.values(),
-        handles.keys(),
+        [handles[k] for k in order],
+        order,
         loc="upper center",
         bbox_to_anchor=(0.5, 0.0),
         ncols=2,
