@@ -85,38 +85,105 @@ OUTPUTS = frozenset(
 (`casecal.report.folder.publish` checks, at the end, what they did write)."""
 
 
-def study_runner(executor: str = "processes", workers=None, scheduler=None, progress: bool = True):
-    """The `Executor` the studies run their trials on, with a progress bar on a terminal."""
-    from ..studies.executor import Executor
+class Progress:
+    """Reports the studies' progress on stderr: `casecal.studies.executor.Executor`'s
+    ``progress(done, total)``, told by `run_studies` which study runs.
 
-    bar = None
+    On a terminal, a tqdm bar labelled with the study (``study 4/11 pose count``); otherwise
+    (a log file, a pipe, CI) plain lines, no carriage returns: the study started, roughly
+    every 10 % of its tasks once it has run `quiet` seconds, and finished with its time.
+    """
 
-    def tick(done, total):
-        nonlocal bar
-        if not (progress and sys.stderr.isatty()):
+    def __init__(self, stream=None, tty: bool | None = None, quiet: float = 5.0):
+        self._stream, self._tty, self.quiet = stream, tty, quiet
+        self.label, self.bar, self.t0 = "", None, time.perf_counter()
+        self._total, self._next, self._done = 0, 0, 0
+
+    @property
+    def stream(self):
+        return self._stream if self._stream is not None else sys.stderr
+
+    @property
+    def tty(self) -> bool:
+        if self._tty is not None:
+            return self._tty
+        isatty = getattr(self.stream, "isatty", None)
+        return bool(isatty and isatty())
+
+    def _line(self, text: str) -> None:
+        print(f"{self.label}: {text}", file=self.stream, flush=True)
+
+    def start(self, k: int, n: int, name: str) -> None:
+        """Study `k` of `n` (from 1) begins."""
+        self._close_bar()
+        self.label = f"study {k}/{n} {NAMES.get(name, name)}"
+        self.t0, self._total, self._next, self._done = time.perf_counter(), 0, 0, 0
+        if not self.tty:
+            self._line("started")
+
+    def finish(self) -> None:
+        self._close_bar()
+        if not self.tty:
+            self._line(f"finished in {time.perf_counter() - self.t0:.1f} s")
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.tty:
+            self._bar(done, total)
             return
+        step = max(1, -(-total // 10))  # every ~10 %
+        if total != self._total or done <= self._done:
+            self._total, self._next = total, step  # a new map over other tasks
+        self._done = done
+        if done >= self._next or done == total:
+            self._next = (done // step + 1) * step
+            elapsed = time.perf_counter() - self.t0
+            if elapsed >= self.quiet:
+                self._line(f"{done}/{total} tasks ({100 * done // total} %), {elapsed:.0f} s")
+
+    def _bar(self, done: int, total: int) -> None:
+        bar = self.bar
         if bar is None or bar.total != total or done < bar.n:
             from tqdm import tqdm
 
-            if bar is not None:
-                bar.close()
-            bar = tqdm(total=total, unit="task", leave=False)
+            self._close_bar()
+            bar = self.bar = tqdm(
+                total=total, unit="task", leave=False, desc=self.label, file=self.stream
+            )
         bar.update(done - bar.n)
         if done == total:
-            bar.close()
-            bar = None
+            self._close_bar()
 
-    return Executor(executor, workers, scheduler, tick)
+    def _close_bar(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def study_runner(executor: str = "processes", workers=None, scheduler=None, progress: bool = True):
+    """The `Executor` the studies run their trials on, reporting through a `Progress`
+    (a labelled bar on a terminal, plain lines elsewhere) unless `progress` is false."""
+    from ..studies.executor import Executor
+
+    return Executor(executor, workers, scheduler, Progress() if progress else None)
 
 
 def run_studies(names, out: Path, quick: bool, run, log=None) -> list[StudyResult]:
-    """Run the named studies into `out` (created); `log(message)` reports progress."""
+    """Run the named studies into `out` (created); `log(message)` reports progress.
+
+    When `run`'s progress is a `Progress`, it is told which study (k of n) runs.
+    """
     out.mkdir(parents=True, exist_ok=True)
     style()
+    progress = getattr(run, "progress", None)
+    progress = progress if isinstance(progress, Progress) else None
     results = []
-    for name in names:
+    for k, name in enumerate(names, 1):
         t0 = time.perf_counter()
+        if progress:
+            progress.start(k, len(names), name)
         results.append(STUDIES[name](out, quick=quick, run=run))
+        if progress:
+            progress.finish()
         if log:
             log(f"{name}: {time.perf_counter() - t0:.1f} s")
     return results

@@ -90,6 +90,40 @@ def pose_axis(ax, counts) -> None:
     ax.set_xticklabels([str(c) for c in counts])
 
 
+def plot_audited(ax, df: pd.DataFrame, x: str, y: str, color, label: str, band: bool = True):
+    """Draw Monte Carlo fits on `ax` split by their answer audit (the bool column ``success``).
+
+    Fits that passed: their median per `x` as a solid line with filled markers, labelled
+    `label`, and (`band`) the 10–90 % band over them. Fits that failed: each as a hollow
+    marker and their median as a dashed line, both thin, labelled "`label`: failed audit",
+    so that a failed fit never looks like an estimate. Returns ``{"passed": medians,
+    "failed": the failed rows}`` (what was drawn).
+    """
+    ok = df.success.astype(bool)
+    passed, failed = df[ok], df[~ok]
+    med = passed.groupby(x)[y].agg(["median", lambda v: v.quantile(0.1), lambda v: v.quantile(0.9)])
+    med.columns = ["median", "p10", "p90"]
+    if len(passed):
+        ax.plot(med.index, med["median"], "-o", ms=3, color=color, label=label)
+        if band:
+            ax.fill_between(med.index, med.p10, med.p90, color=color, alpha=0.15, lw=0)
+    if len(failed):
+        fmed = failed.groupby(x)[y].median()
+        ax.plot(fmed.index, fmed, "--", lw=0.8, color=color, alpha=0.7)
+        ax.plot(
+            failed[x],
+            failed[y],
+            "o",
+            ms=4,
+            mfc="none",
+            mew=0.8,
+            color=color,
+            alpha=0.8,
+            label=f"{label}: failed audit",
+        )
+    return {"passed": med.reset_index(), "failed": failed}
+
+
 def save(fig, out: Path, name: str, title: str, caption: str) -> Figure:
     """Write `fig` as PNG into `out` and close it."""
     path = out / f"{name}.png"

@@ -2,6 +2,9 @@
 
 Figures and tables flow down A4 portrait pages: a block (heading, content, caption) goes
 below the previous one when it fits, else on a new page, so no page is left mostly blank.
+A figure shrinks (to 65 % at most) rather than leave a page half empty, and where the next
+block does not fit, one of the two after it that does fills the page first; blocks are
+numbered in the order they appear. Titles wrap at the measured width between the margins.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import matplotlib.pyplot as plt
 from matplotlib.backends.backend_pdf import PdfPages
 
 from .common import Figure, StudyResult, Table
-from .pdf_table import draw_table, table_height
+from .pdf_table import WIDTH, _text_width, draw_table, table_height
 
 A4 = (8.27, 11.69)  # inches
 MARGIN = 0.05  # of the page height, top and bottom
@@ -23,7 +26,12 @@ LEFT = 0.08  # of the page width
 GAP = 0.025  # between blocks, of the page height
 CAPTION_PT = 9
 LINE = CAPTION_PT * 1.4 / 72 / A4[1]  # one caption line, of the page height
-HEADING = 0.03
+HEADING = 0.03  # one line of a block's title
+TITLE_PT = 12
+TITLE_LINE = TITLE_PT * 1.25 / 72 / A4[1]  # each further line of a title
+SHRINK = 0.65  # how small a figure may get to fill a page, of its natural height
+LOOKAHEAD = 2  # how many blocks ahead one may be taken to fill a page
+MAX_ROWS = 30  # of a table set in the PDF
 
 
 @dataclass
@@ -41,7 +49,7 @@ class _Flow:
 
     def place(self, height: float):
         """The figure and the top (fraction) of a free band of `height`."""
-        if self.fig is None or self.y - height < MARGIN:
+        if self.fig is None or self.y - height < MARGIN - 1e-9:  # rounding: a block sized to fit
             self.close()
             self.fig, self.y = plt.figure(figsize=A4), 1 - MARGIN
         top = self.y
@@ -90,30 +98,92 @@ def _caption_height(text: str) -> float:
     return (_wrap(text).count("\n") + 1) * LINE
 
 
-def _figure_block(flow: _Flow, number: int, figure: Figure) -> None:
-    img = mpimg.imread(figure.path)
-    h, w = img.shape[:2]
-    width = 0.84
-    height = min(width * h / w * A4[0] / A4[1], 0.55)
-    rest = HEADING + 0.01 + _caption_height(figure.caption)
-    if height + rest > flow.room >= 0.75 * height + rest:
-        height = flow.room - rest  # a little smaller rather than a half-empty page
-    width = height * w / h * A4[1] / A4[0]
-    fig, top = flow.place(height + rest)
-    fig.text(LEFT, top - 0.015, f"Figure {number}. {figure.title}", fontsize=12, weight="bold")
-    ax = fig.add_axes([(1 - width) / 2, top - HEADING - height, width, height])
-    ax.imshow(img)
-    ax.axis("off")
-    _caption(fig, figure.caption, top - HEADING - height - 0.01)
+def title_lines(text: str, pt: float = TITLE_PT) -> list[str]:
+    """`text` in bold at `pt`, broken at spaces into lines that each fit between the margins."""
+    room = WIDTH * A4[0] * 72  # points
+    lines: list[str] = []
+    for word in text.split(" "):
+        trial = f"{lines[-1]} {word}" if lines else word
+        if lines and _text_width(trial, pt, True) > room:
+            lines.append(word)
+        else:
+            lines[-1:] = [trial]
+    return lines
 
 
-def _table_block(flow: _Flow, number: int, tab: Table, max_rows: int = 30) -> None:
-    df = (tab.shown if tab.shown is not None else tab.frame).head(max_rows)
-    body = table_height(df, A4)
-    fig, top = flow.place(HEADING + body + 0.01 + _caption_height(tab.caption))
-    fig.text(LEFT, top - 0.015, f"Table {number}. {tab.title}", fontsize=12, weight="bold")
-    draw_table(fig, df, top - HEADING, A4)
-    _caption(fig, tab.caption, top - HEADING - body - 0.01)
+def _heading_height(text: str) -> float:
+    return HEADING + (len(title_lines(text)) - 1) * TITLE_LINE
+
+
+def _heading(fig, text: str, top: float) -> None:
+    fig.text(
+        LEFT,
+        top - 0.004,
+        "\n".join(title_lines(text)),
+        fontsize=TITLE_PT,
+        weight="bold",
+        va="top",
+        linespacing=1.25,
+    )
+
+
+class _Block:
+    """A figure or a table with its heading and caption, and the band of page it needs."""
+
+    def __init__(self, kind: str, item: Figure | Table):
+        self.kind, self.item = kind, item
+        if kind == "Figure":
+            h, w = mpimg.imread(item.path).shape[:2]
+            self.aspect = h / w  # of the image
+            self.image = min(0.84 * self.aspect * A4[0] / A4[1], 0.55)
+        else:
+            df = item.shown if item.shown is not None else item.frame
+            self.frame = df.head(MAX_ROWS)
+            self.image = table_height(self.frame, A4)
+        # sized for a two-digit number: the title may wrap one word earlier than with one
+        self.rest = _heading_height(self.heading(99)) + 0.01 + _caption_height(item.caption)
+
+    def heading(self, number: int) -> str:
+        return f"{self.kind} {number}. {self.item.title}"
+
+    @property
+    def height(self) -> float:
+        return self.image + self.rest
+
+    @property
+    def smallest(self) -> float:
+        """A figure may shrink a little rather than leave a half-empty page; a table not."""
+        return (SHRINK * self.image if self.kind == "Figure" else self.image) + self.rest
+
+    def fits(self, room: float) -> bool:
+        return self.smallest <= room
+
+    def draw(self, flow: _Flow, number: int) -> None:
+        image = self.image
+        if self.kind == "Figure" and self.height > flow.room >= self.smallest:
+            image = flow.room - self.rest
+        fig, top = flow.place(image + self.rest)
+        _heading(fig, self.heading(number), top)
+        top -= _heading_height(self.heading(number))
+        if self.kind == "Figure":
+            width = image / self.aspect * A4[1] / A4[0]
+            ax = fig.add_axes([(1 - width) / 2, top - image, width, image])
+            ax.imshow(mpimg.imread(self.item.path))
+            ax.axis("off")
+        else:
+            draw_table(fig, self.frame, top, A4)
+        _caption(fig, self.item.caption, top - image - 0.01)
+
+
+def _next_block(blocks: list[_Block], flow: _Flow) -> _Block:
+    """The next block in order, unless it does not fit the current page while one of the
+    next `LOOKAHEAD` does: that one fills the page first (a half-empty page otherwise)."""
+    room = flow.room
+    if flow.fig is not None and not blocks[0].fits(room):
+        for j in range(1, min(len(blocks), 1 + LOOKAHEAD)):
+            if blocks[j].fits(room):
+                return blocks.pop(j)
+    return blocks.pop(0)
 
 
 def write_pdf(
@@ -131,20 +201,20 @@ def write_pdf(
     the title page is.
     """
     layout = layout if layout is not None else Layout()
-    n_fig = n_tab = 0
+    blocks = []
+    for study in studies:
+        blocks += [_Block("Table", t) for t in study.tables if t.path.stem in table_names]
+        blocks += [_Block("Figure", f) for f in study.figures]
+    numbers = {"Figure": 0, "Table": 0}
     with PdfPages(path) as pdf:
         _title_page(pdf, title, settings)
         flow = _Flow(pdf, layout)
-        for study in studies:
-            for tab in study.tables:
-                if tab.path.stem in table_names:
-                    n_tab += 1
-                    _table_block(flow, n_tab, tab)
-            for figure in study.figures:
-                n_fig += 1
-                _figure_block(flow, n_fig, figure)
+        while blocks:
+            block = _next_block(blocks, flow)
+            numbers[block.kind] += 1  # numbered in the order they appear
+            block.draw(flow, numbers[block.kind])
         flow.close()
         info = pdf.infodict()
         info["Title"] = title
         info["Creator"] = "casecal report"
-    return n_fig
+    return numbers["Figure"]

@@ -14,7 +14,7 @@ from ..identification.analysis import observability
 from ..identification.fit import identify
 from ..model.catalog import load_robot
 from ..studies.engine import Grid, derive_seed, run_study, summarise
-from .common import COLORS, METHOD_LABEL, StudyResult, pose_axis, save, table
+from .common import COLORS, METHOD_LABEL, StudyResult, plot_audited, pose_axis, save, table
 from .studies_paper import label
 
 DH = ("theta*", "d*", "a*", "alpha*")
@@ -46,7 +46,8 @@ def noise_sweep(out: Path, quick: bool = False, run=None) -> StudyResult:
     every = df.assign(success=df.success.astype(bool))
     df = every[every.success]  # a failed fit says so; its numbers are not estimates
     names = ("theta2", "a2", "d2", "theta3")
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.4))
+    # room between the panels for the middle one's y label
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.4), gridspec_kw={"wspace": 0.42})
     gn, n_gn = _common_set(df[df.method == "gauss-newton"])
     ratios = []
     # markers and line styles differ so that series lying on each other stay visible
@@ -74,7 +75,8 @@ def noise_sweep(out: Path, quick: bool = False, run=None) -> StudyResult:
     for ax, what in zip(axes[:2], ("angles", "lengths"), strict=True):
         ax.set_xlabel("measurement noise σ (mm)")
         ax.set_title(what, loc="left")
-        ax.legend(fontsize=6.5, ncols=1, loc="upper left")
+        # below the panel: inside, any corner is near a point at some noise level
+        ax.legend(fontsize=6.5, ncols=2, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     ax = axes[2]
     bands = summarise(df, ["method", "noise_mm"], "rms_holdout_mm")
     for method, g in bands.groupby("method"):
@@ -91,7 +93,7 @@ def noise_sweep(out: Path, quick: bool = False, run=None) -> StudyResult:
     ax.loglog(bands.noise_mm.unique(), bands.noise_mm.unique(), "k:", lw=0.8, label="error = σ")
     ax.set_xlabel("measurement noise σ (mm)")
     ax.set_ylabel("held-out RMS position error (mm)")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=6.5, ncols=2, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     lo, hi = min(ratios), max(ratios)
     med = bands.pivot_table(index="noise_mm", columns="method", values="median")
     one_shot = float((med["svd"] / med["gauss-newton"]).max())
@@ -288,17 +290,27 @@ def six_axis(out: Path, quick: bool = False, run=None) -> StudyResult:
     passed = df.groupby("model").success.agg(["sum", "size"])
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), sharey=True)
     for ax, name in zip(axes, robots, strict=True):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
         for i, (model, g) in enumerate(df[df.robot == name].groupby("model")):
-            b = summarise(g, ["n_poses"], "rms_holdout_mm")
             color = COLORS["svd"] if i == 1 else COLORS["gauss-newton"]
-            ax.loglog(b.n_poses, b["median"], marker="o", ms=3, color=color, label=model)
-            ax.fill_between(b.n_poses, b.p10, b.p90, color=color, alpha=0.15)
+            plot_audited(ax, g, "n_poses", "rms_holdout_mm", color, model)
         ax.axhline(SIGMA * 1e3, color="k", lw=0.7, ls=":")
         ax.set_title(load_robot(name).full_name)
         ax.set_xlabel("number of poses N")
         pose_axis(ax, counts)
     axes[0].set_ylabel("held-out RMS position error (mm)")
-    axes[0].legend(fontsize=7)
+    handles = {h.get_label(): h for a in axes for h in a.get_legend_handles_labels()[0]}
+    order = sorted(handles, key=lambda k: k.endswith("failed audit"))  # passed fits first
+    fig.legend(
+        [handles[k] for k in order],
+        order,
+        loc="upper center",
+        bbox_to_anchor=(0.5, 0.0),
+        ncols=2,
+        fontsize=7,
+        frameon=False,
+    )
     big = df[df.n_poses == max(counts)].groupby(["robot", "model"])["rms_holdout_mm"].median()
     res.figures.append(
         save(
@@ -320,8 +332,10 @@ def six_axis(out: Path, quick: bool = False, run=None) -> StudyResult:
             )
             + "; "
             + _passed_text(passed, "with")
-            + "). Lines: median over the trials; bands: 10–90 % of trials; dotted line: the "
-            f"noise σ = {SIGMA * 1e3:g} mm. Every trial is drawn, failed or not. Calibrate arms "
+            + "). Dotted line: the "
+            f"noise σ = {SIGMA * 1e3:g} mm. Fits that passed their audit: solid line (median) "
+            "and band (10–90 %); fits that failed it: hollow circles, each fit, and a dashed "
+            "line through their median. Calibrate arms "
             "with parallel axes with β.",
         )
     )
