@@ -124,11 +124,7 @@ def run_program(args: argparse.Namespace, calibrated, nominal) -> None:
     from ..programs import calibration_header, compensate_program, program_format
     from ..textio import read_bytes, write_atomic
 
-    fmt = program_format(args.program, args.format)
-    if os.path.exists(args.output) and os.path.samefile(args.output, args.program):
-        raise CalibrationError(
-            f"-o {args.output!r} is the program read; write the compensated one beside it"
-        )
+    fmt = program_format(args.program, args.format)  # -o as the input: refused before
     data = read_bytes(args.program, "program")
     try:
         text, encoding = data.decode("utf-8"), "utf-8"

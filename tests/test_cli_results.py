@@ -1,0 +1,112 @@
+"""identify's --json, --residuals and --plot, and compensate --program, through the
+installed entry point (``python -m casecal``), as a script or a shell would run them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+from test_programs import KRL_DAT, KRL_DAT_TARGETS, NUMBER  # tests/ is on the path
+
+import casecal as cc
+
+
+def casecal(*args, cwd) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "casecal", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """A KR 16's tracker file (one gross reading) and its calibration by the command."""
+    folder = tmp_path_factory.mktemp("cli_results")
+    robot = cc.load_robot("kr16_2")
+    q = cc.poses.uniform(robot, 150, seed=5)
+    true = robot.with_deviations({"a2": 3e-4, "d4": -2e-4, "theta3": 2e-4, "a3": 1e-4})
+    meas = cc.simulate(true, q, noise=2e-5, seed=6)
+    y = meas.positions.copy()
+    y[11] += [0.0, 2e-3, 0.0]  # 2 mm off: stands out
+    cc.write_csv(folder / "m.csv", cc.Measurements(q=q, positions=y, sigma=2e-5), robot)
+    run = casecal(
+        "identify", "kr16_2", "m.csv", "-o", "cal.toml", "--json", "r.json", "--loss",
+        "huber", "--residuals", "r.csv", "--plot", "r.png", cwd=folder,
+    )  # fmt: skip
+    return folder, robot, q, y, run
+
+
+def test_identify_writes_json_residuals_and_plot(calibrated):
+    folder, _, q, y, run = calibrated
+    assert run.returncode == 0, run.stderr
+    result = json.loads((folder / "r.json").read_text())
+    assert result["schema"] == "casecal.calibration/1" and result["success"] is True
+    assert 11 in result["outliers"]
+    fitted = cc.load_robot(str(folder / "cal.toml"))
+    error = np.linalg.norm(y - fitted.position(q), axis=1) * 1e3  # from the written robot
+    assert result["rms_after_mm"] == pytest.approx(np.sqrt(np.mean(error**2)), rel=1e-6)
+    table = pd.read_csv(folder / "r.csv")
+    assert len(table) == 150 and table.loc[table.outlier, "pose"].tolist() == [11]
+    assert table.error_after_mm.to_numpy() == pytest.approx(error, rel=1e-6, abs=1e-9)
+    assert (folder / "r.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_failed_fit_still_says_why_in_its_json(tmp_path):
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 60, seed=1)
+    true = robot.with_deviations({"alpha3": 1e-3, "d3": 5e-4})  # not what is asked for
+    cc.write_csv(tmp_path / "m.csv", cc.simulate(true, q, noise=2e-5, seed=2), robot)
+    run = casecal("identify", "puma560", "m.csv", "--parameters", "a2,a3", "-o", "cal.toml",
+                  "--json", "r.json", cwd=tmp_path)  # fmt: skip
+    assert run.returncode != 0 and not (tmp_path / "cal.toml").exists()
+    result = json.loads((tmp_path / "r.json").read_text())
+    assert result["success"] is False and result["audit"]["passed"] is False
+
+
+def test_json_with_distances_is_refused_in_one_line(tmp_path):
+    run = casecal("identify", "puma560", "p.csv", "--pairs", "d.csv", "--json", "r.json",
+                  cwd=tmp_path)  # fmt: skip
+    assert run.returncode != 0 and "--json" in run.stderr and run.stderr.count("\n") == 1
+
+
+def test_compensate_program_changes_only_the_targets(calibrated):
+    folder, _, _, _, run = calibrated
+    assert run.returncode == 0, run.stderr
+    (folder / "cell.dat").write_bytes(KRL_DAT.encode("cp1252").replace(b"WELD", b"W\xe4LD"))
+    out = casecal("compensate", "cal.toml", "--program", "cell.dat", "-o", "new.dat",
+                  cwd=folder)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    old, new = (folder / "cell.dat").read_bytes(), (folder / "new.dat").read_bytes()
+    assert new.startswith(old[: old.index(b"\r\n", old.index(b"DEFDAT")) + 2])  # \xe4 kept
+    header = new.split(b"\r\n")[4].decode("cp1252")
+    assert header.startswith(";") and "cal.toml (sha256 " in header and "audit: passed" in header
+    old_lines, new_lines = old.split(b"\r\n"), new.split(b"\r\n")
+    del new_lines[4]  # the header line
+    assert len(old_lines) == len(new_lines)
+    for n, (a, b) in enumerate(zip(old_lines, new_lines, strict=True), start=1):
+        a, b = a.decode("cp1252"), b.decode("cp1252")
+        assert NUMBER.sub("#", a) == NUMBER.sub("#", b)  # only numbers changed
+        assert a == b or n in KRL_DAT_TARGETS
+    assert sum(a != b for a, b in zip(old_lines, new_lines, strict=True)) >= 1
+    # the rest are listed with the reason (line 15's A1 190° would pass joint 1's limit)
+    assert "line 15 left as it was: outside the limits of joint 1" in out.stdout
+    # the targets are the library's (tests/test_programs.py checks where they lead)
+    fitted = cc.load_robot(str(folder / "cal.toml"))
+    text = old.decode("cp1252")
+    from casecal.programs import calibration_header
+
+    verdict = "passed (casecal identify wrote it after its audit)"
+    library = cc.compensate_program(
+        fitted, text, "krl", header=calibration_header(folder / "cal.toml", verdict)
+    )
+    assert new.decode("cp1252") == library.text
+    refused = casecal("compensate", "cal.toml", "--program", "cell.dat", "-o", "cell.dat",
+                      cwd=folder)  # fmt: skip
+    assert refused.returncode != 0 and "is also the file read as program" in refused.stderr
