@@ -110,3 +110,28 @@ def test_compensate_program_changes_only_the_targets(calibrated):
     refused = casecal("compensate", "cal.toml", "--program", "cell.dat", "-o", "cell.dat",
                       cwd=folder)  # fmt: skip
     assert refused.returncode != 0 and "is also the file read as program" in refused.stderr
+
+
+def test_observability_and_validate_write_json(calibrated, tmp_path):
+    folder, robot, _, _, run = calibrated
+    assert run.returncode == 0, run.stderr
+    out = casecal("observability", "scara", "--poses", "100", "--schedule", "seed", "--json",
+                  tmp_path / "o.json", cwd=tmp_path)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    obs = json.loads((tmp_path / "o.json").read_text())
+    expected = cc.observability(cc.load_robot("scara"), cc.poses.seed_schedule(
+        cc.load_robot("scara"), 100))  # fmt: skip
+    assert obs["schema"] == "casecal.observability/1" and obs["rank"] == expected.rank
+    assert obs["unidentifiable"] == list(expected.unidentifiable)
+    # held-out poses of the same true robot: the calibration's errors, recomputed here
+    q = cc.poses.uniform(robot, 80, seed=21)
+    true = robot.with_deviations({"a2": 3e-4, "d4": -2e-4, "theta3": 2e-4, "a3": 1e-4})
+    meas = cc.simulate(true, q, noise=2e-5, seed=22)
+    cc.write_csv(tmp_path / "held.csv", meas, robot)
+    out = casecal("validate", folder / "cal.toml", "held.csv", "--json", "v.json",
+                  cwd=tmp_path)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    v = json.loads((tmp_path / "v.json").read_text())
+    assert v["schema"] == "casecal.validation/1" and v["n_poses"] == 80
+    assert v["after"]["rms_mm"] < 0.3 * v["before"]["rms_mm"]  # the calibration helps
+    assert f"{v['after']['rms_mm']:10.4f}" in out.stdout  # the printed table says the same

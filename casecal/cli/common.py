@@ -242,3 +242,17 @@ def _same_file(a: str, b: str) -> bool:
 def one_line_warning(message, category, filename, lineno, file=None, line=None):
     """`warnings.showwarning` of the command: one line, no source location."""
     print(f"casecal: warning: {message}", file=sys.stderr)
+
+
+def json_text(data: dict) -> str:
+    """`data` as indented JSON text (no NaN: `casecal.identification.result_dict`)."""
+    import json
+
+    return json.dumps(data, indent=2, allow_nan=False) + "\n"
+
+
+def write_json(path: str, data: dict) -> None:
+    """Write `data` as indented JSON to `path`, atomically."""
+    from ..textio import write_atomic
+
+    write_atomic(path, json_text(data))

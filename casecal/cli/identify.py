@@ -17,6 +17,7 @@ from .common import (
     add_robot_options,
     check_writable_dir,
     command,
+    json_text,
     parse_angle,
     parse_length,
     robot_for,
@@ -108,9 +109,7 @@ def _result_files(args: argparse.Namespace, cal, q) -> list:
     """(path, text or bytes) of --json, --residuals and --plot."""
     files = []
     if args.json:
-        import json
-
-        files.append((args.json, json.dumps(cal.to_dict(), indent=2, allow_nan=False) + "\n"))
+        files.append((args.json, json_text(cal.to_dict())))
     if args.residuals:
         table = cal.residual_table()
         files.append((args.residuals, table.to_csv(index=False, float_format="%.9g")))

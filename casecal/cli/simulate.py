@@ -22,6 +22,7 @@ from .common import (
     parse_length,
     robot_for,
     say,
+    write_json,
 )
 
 
@@ -88,6 +89,12 @@ def add_parser(sub) -> None:
     add_schedule(p, 100)
     p.add_argument("--parameters", default=None, help=PARAMS_HELP)
     add_robot_options(p)
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="also write the result as one JSON object (keys in the README); "
+        "'/dev/stdout' for a pipe",
+    )
     p.set_defaults(func=run_observability)
 
 
@@ -132,3 +139,7 @@ def run_observability(args: argparse.Namespace) -> None:
     obs = observability(robot, q, args.parameters)
     print(f"{robot.name}, {args.schedule} schedule, {args.poses} poses")
     print(obs)
+    if args.json:
+        from ..identification.result_dict import observability_dict
+
+        write_json(args.json, observability_dict(obs))

@@ -6,9 +6,10 @@ import argparse
 
 from ..data.files import read_csv
 from ..errors import CalibrationError
+from ..identification.result_dict import validation_dict
 from ..identification.validation import validate
 from ..model.catalog import nominal_of
-from .common import add_robot_options, command, robot_for
+from .common import add_robot_options, command, robot_for, write_json
 
 
 def add_parser(sub) -> None:
@@ -27,6 +28,12 @@ def add_parser(sub) -> None:
         "--nominal",
         metavar="ROBOT",
         help="the nominal robot (default: calibrated_from in the TOML)",
+    )
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="also write the result as one JSON object (keys in the README); "
+        "'/dev/stdout' for a pipe",
     )
     add_robot_options(p)
     p.set_defaults(func=run)
@@ -47,4 +54,7 @@ def run(args: argparse.Namespace) -> None:
     ):
         raise CalibrationError(f"{nominal_name} and {args.calibrated} are different robots")
     meas = read_csv(args.measurements, calibrated)
-    print(validate(calibrated, meas, nominal))
+    result = validate(calibrated, meas, nominal)
+    print(result)
+    if args.json:
+        write_json(args.json, validation_dict(result))

@@ -125,3 +125,48 @@ def residual_rows(cal: Calibration) -> pd.DataFrame:
         data[f"error_{label}_mm"] = np.linalg.norm(r, axis=1) * 1e3
     data["outlier"] = np.isin(pose, np.asarray(cal.outliers, dtype=int))
     return pd.DataFrame(data)
+
+
+def _stats(stats, scale: float, unit: str) -> dict | None:
+    """`ErrorStats` as ``rms_<unit>``, ``mean_<unit>``, ``max_<unit>``, ``n_points``."""
+    if stats is None:
+        return None
+    return {
+        f"rms_{unit}": _number(stats.rms * scale),
+        f"mean_{unit}": _number(stats.mean * scale),
+        f"max_{unit}": _number(stats.max * scale),
+        "n_points": int(stats.n_points),
+    }
+
+
+def validation_dict(validation) -> dict:
+    """A `casecal.validate` result, JSON-ready: ``schema``, ``n_poses``, ``before`` and
+    ``after`` (``rms_mm``, ``mean_mm``, ``max_mm``, ``n_points``), and where orientations
+    were measured ``rotation_before`` and ``rotation_after`` (the same in mrad, else None)."""
+    return {
+        "schema": "casecal.validation/1",
+        "n_poses": int(validation.n_poses),
+        "before": _stats(validation.before, 1e3, "mm"),
+        "after": _stats(validation.after, 1e3, "mm"),
+        "rotation_before": _stats(validation.rotation_before, 1e3, "mrad"),
+        "rotation_after": _stats(validation.rotation_after, 1e3, "mrad"),
+    }
+
+
+def observability_dict(obs) -> dict:
+    """A `casecal.observability` result, JSON-ready: ``schema``, ``n_poses``,
+    ``parameters``, ``rank``, ``identifiable``, ``unidentifiable``, ``base_parameters``,
+    ``blind_spots`` (sentences), ``singular_values`` (of the column-scaled Jacobian, no
+    unit) and ``indices`` (O1 … O5)."""
+    return {
+        "schema": "casecal.observability/1",
+        "n_poses": int(obs.n_poses),
+        "parameters": list(obs.parameters),
+        "rank": int(obs.rank),
+        "identifiable": list(obs.identifiable),
+        "unidentifiable": list(obs.unidentifiable),
+        "base_parameters": list(obs.base_parameters),
+        "blind_spots": [spot.text for spot in obs.blind_spots],
+        "singular_values": [_number(s) for s in obs.singular_values],
+        "indices": {k: _number(v) for k, v in obs.indices.items()},
+    }
