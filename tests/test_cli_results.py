@@ -135,3 +135,16 @@ def test_observability_and_validate_write_json(calibrated, tmp_path):
     assert v["schema"] == "casecal.validation/1" and v["n_poses"] == 80
     assert v["after"]["rms_mm"] < 0.3 * v["before"]["rms_mm"]  # the calibration helps
     assert f"{v['after']['rms_mm']:10.4f}" in out.stdout  # the printed table says the same
+
+
+def test_compare_writes_json(calibrated, tmp_path):
+    folder, *_ = calibrated
+    out = casecal("compare", "kr16_2", folder / "m.csv", "--harmonics", "2:1", "--folds", "3",
+                  "--json", "c.json", cwd=tmp_path)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    c = json.loads((tmp_path / "c.json").read_text())
+    assert c["schema"] == "casecal.comparison/1"
+    assert [m["model"] for m in c["models"]] == ["rigid", "+ harmonics 2:1"]
+    assert c["best"] in ("", "rigid", "+ harmonics 2:1")
+    assert all(isinstance(m["success"], bool) and m["cv_rms_mm"] > 0 for m in c["models"])
+    assert f"chosen by cross-validation: {c['best']}" in out.stdout or not c["best"]

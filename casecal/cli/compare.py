@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from .common import add_robot_options, command, robot_for
+from .common import add_robot_options, command, robot_for, write_json
 
 
 def add_parser(sub) -> None:
@@ -37,6 +37,12 @@ def add_parser(sub) -> None:
         help="add harmonics of a joint's angle up to ORDER (repeatable), e.g. 2:2",
     )
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="also write the comparison as one JSON object (keys in the README); "
+        "'/dev/stdout' for a pipe",
+    )
     add_robot_options(p)
     p.set_defaults(func=run)
 
@@ -72,4 +78,9 @@ def run(args: argparse.Namespace) -> None:
         at = names.index("+ compliance") + 1
         extra = {"+ compliance, terms that predict": ReducedLumped(rigid)}
         models = {n: models[n] for n in names[:at]} | extra | {n: models[n] for n in names[at:]}
-    print(compare_models(models, meas, folds=args.folds))
+    comparison = compare_models(models, meas, folds=args.folds)
+    print(comparison)
+    if args.json:
+        from ..identification.result_dict import comparison_dict
+
+        write_json(args.json, comparison_dict(comparison))

@@ -170,3 +170,19 @@ def observability_dict(obs) -> dict:
         "singular_values": [_number(s) for s in obs.singular_values],
         "indices": {k: _number(v) for k, v in obs.indices.items()},
     }
+
+
+def comparison_dict(comparison) -> dict:
+    """A `casecal.compare_models` result, JSON-ready: ``schema``, ``best`` (the chosen
+    model, "" when no fit passed) and ``models``: one dict per model with ``model``,
+    ``parameters``, ``rms_mm``, ``cv_rms_mm``, ``cv_se_mm``, ``aic``, ``bic``,
+    ``success`` and ``message``."""
+    models = []
+    for row in comparison.table.to_dict(orient="records"):
+        models.append(
+            {
+                k: (_number(v) if isinstance(v, float) else v.item() if hasattr(v, "item") else v)
+                for k, v in row.items()
+            }
+        )
+    return {"schema": "casecal.comparison/1", "best": comparison.best, "models": models}
