@@ -244,6 +244,16 @@ def one_line_warning(message, category, filename, lineno, file=None, line=None):
     print(f"casecal: warning: {message}", file=sys.stderr)
 
 
+def add_json_option(p) -> None:
+    """--json FILE: the command's result also as one JSON object (keys in the README)."""
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="also write the result as one JSON object (keys in the README); "
+        "'/dev/stdout' for a pipe",
+    )
+
+
 def json_text(data: dict) -> str:
     """`data` as indented JSON text (no NaN: `casecal.identification.result_dict`)."""
     import json

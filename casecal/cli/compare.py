@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from .common import add_robot_options, command, robot_for, write_json
+from .common import add_json_option, add_robot_options, command, robot_for, write_json
 
 
 def add_parser(sub) -> None:
@@ -37,12 +37,7 @@ def add_parser(sub) -> None:
         help="add harmonics of a joint's angle up to ORDER (repeatable), e.g. 2:2",
     )
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
-    p.add_argument(
-        "--json",
-        metavar="FILE",
-        help="also write the comparison as one JSON object (keys in the README); "
-        "'/dev/stdout' for a pipe",
-    )
+    add_json_option(p)
     add_robot_options(p)
     p.set_defaults(func=run)
 

@@ -16,6 +16,7 @@ from ..identification.analysis import observability
 from ..model.catalog import load_deviations
 from .common import (
     PARAMS_HELP,
+    add_json_option,
     add_robot_options,
     check_writable_dir,
     command,
@@ -89,12 +90,7 @@ def add_parser(sub) -> None:
     add_schedule(p, 100)
     p.add_argument("--parameters", default=None, help=PARAMS_HELP)
     add_robot_options(p)
-    p.add_argument(
-        "--json",
-        metavar="FILE",
-        help="also write the result as one JSON object (keys in the README); "
-        "'/dev/stdout' for a pipe",
-    )
+    add_json_option(p)
     p.set_defaults(func=run_observability)
 
 

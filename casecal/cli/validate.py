@@ -9,7 +9,7 @@ from ..errors import CalibrationError
 from ..identification.result_dict import validation_dict
 from ..identification.validation import validate
 from ..model.catalog import nominal_of
-from .common import add_robot_options, command, robot_for, write_json
+from .common import add_json_option, add_robot_options, command, robot_for, write_json
 
 
 def add_parser(sub) -> None:
@@ -29,12 +29,7 @@ def add_parser(sub) -> None:
         metavar="ROBOT",
         help="the nominal robot (default: calibrated_from in the TOML)",
     )
-    p.add_argument(
-        "--json",
-        metavar="FILE",
-        help="also write the result as one JSON object (keys in the README); "
-        "'/dev/stdout' for a pipe",
-    )
+    add_json_option(p)
     add_robot_options(p)
     p.set_defaults(func=run)
 
