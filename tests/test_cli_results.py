@@ -81,7 +81,7 @@ def test_compensate_program_changes_only_the_targets(calibrated):
     assert run.returncode == 0, run.stderr
     (folder / "cell.dat").write_bytes(KRL_DAT.encode("cp1252").replace(b"WELD", b"W\xe4LD"))
     out = casecal("compensate", "cal.toml", "--program", "cell.dat", "-o", "new.dat",
-                  cwd=folder)  # fmt: skip
+                  "--json", "comp.json", cwd=folder)  # fmt: skip
     assert out.returncode == 0, out.stderr
     old, new = (folder / "cell.dat").read_bytes(), (folder / "new.dat").read_bytes()
     assert new.startswith(old[: old.index(b"\r\n", old.index(b"DEFDAT")) + 2])  # \xe4 kept
@@ -97,6 +97,10 @@ def test_compensate_program_changes_only_the_targets(calibrated):
     assert sum(a != b for a, b in zip(old_lines, new_lines, strict=True)) >= 1
     # the rest are listed with the reason (line 15's A1 190° would pass joint 1's limit)
     assert "line 15 left as it was: outside the limits of joint 1" in out.stdout
+    summary = json.loads((folder / "comp.json").read_text())
+    assert summary["schema"] == "casecal.compensation/1" and summary["output"] == "new.dat"
+    assert 15 in [left["line"] for left in summary["left"]]
+    assert summary["corrected"] == sum(a != b for a, b in zip(old_lines, new_lines, strict=True))
     # the targets are the library's (tests/test_programs.py checks where they lead)
     fitted = cc.load_robot(str(folder / "cal.toml"))
     text = old.decode("cp1252")

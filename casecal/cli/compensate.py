@@ -8,7 +8,7 @@ import io
 import numpy as np
 
 from ..errors import CalibrationError
-from .common import add_robot_options, command, robot_for, say
+from .common import add_json_option, add_robot_options, command, robot_for, say, write_json
 
 
 def add_parser(sub) -> None:
@@ -70,6 +70,7 @@ def add_parser(sub) -> None:
         "arms of six or more joints: the whole pose). For a calibration from positions "
         "alone, whose tool orientation may be blind",
     )
+    add_json_option(p)
     add_robot_options(p)
     p.set_defaults(func=run)
 
@@ -105,6 +106,9 @@ def run(args: argparse.Namespace) -> None:
     buffer = io.StringIO()
     pd.DataFrame(columns).to_csv(buffer, index=False, float_format="%.17g")
     write_atomic(args.output, buffer.getvalue())
+    if args.json:
+        left = [{"row": int(i), "reason": result.reason[i]} for i in np.flatnonzero(~result.ok)]
+        write_json(args.json, _summary(args, len(q), left))
     bad = int((~result.ok).sum())
     say(
         f"wrote {len(q)} corrected targets to {args.output}"
@@ -143,6 +147,21 @@ def run_program(args: argparse.Namespace, calibrated, nominal) -> None:
         calibrated, text, fmt, nominal, header=header, frame=args.frame, orientation=orientation
     )
     write_atomic(args.output, result.text.encode(encoding))
+    if args.json:
+        left = [{"line": line, "reason": reason} for line, reason in result.skipped]
+        write_json(args.json, _summary(args, len(result.changed) + len(left), left))
     say(f"wrote {args.output}: {len(result.changed)} target(s) compensated")
     for line, reason in result.skipped:
         say(f"  line {line} left as it was: {reason}")
+
+
+def _summary(args: argparse.Namespace, targets: int, left: list) -> dict:
+    """--json: ``schema``, ``output``, ``targets``, ``corrected`` and ``left`` (each with
+    its CSV ``row`` (0-based) or program ``line`` (1-based) and ``reason``)."""
+    return {
+        "schema": "casecal.compensation/1",
+        "output": args.output,
+        "targets": targets,
+        "corrected": targets - len(left),
+        "left": left,
+    }
