@@ -152,3 +152,16 @@ def test_compare_writes_json(calibrated, tmp_path):
     assert c["best"] in ("", "rigid", "+ harmonics 2:1")
     assert all(isinstance(m["success"], bool) and m["cv_rms_mm"] > 0 for m in c["models"])
     assert f"chosen by cross-validation: {c['best']}" in out.stdout or not c["best"]
+
+
+@pytest.mark.parametrize("option", ["--json", "--residuals", "--plot"])
+def test_a_result_file_never_replaces_the_measurements(calibrated, tmp_path, option):
+    folder, *_ = calibrated
+    data = (folder / "m.csv").read_bytes()
+    (tmp_path / "m.csv").write_bytes(data)
+    out = casecal("identify", "kr16_2", "m.csv", option, "m.csv", cwd=tmp_path)
+    assert out.returncode != 0 and "is also the file read as measurements" in out.stderr
+    assert (tmp_path / "m.csv").read_bytes() == data
+    both = casecal("identify", "kr16_2", "m.csv", "-o", "x.toml", option, "x.toml",
+                   cwd=tmp_path)  # fmt: skip
+    assert both.returncode != 0 and "both name" in both.stderr

@@ -203,6 +203,9 @@ OUTPUTS = {
     "out": "OUT",
     "deviations_out": "--deviations-out",
     "camera_out": "--camera-out",
+    "json": "--json",
+    "residuals": "--residuals",
+    "plot": "--plot",
 }
 """The options that name files a command writes (``report -o`` names a folder)."""
 
