@@ -69,3 +69,15 @@ def test_the_residual_plot_marks_what_stands_out(fitted, tmp_path):
     assert imread(png).shape[0] > 300
     with pytest.raises(ValueError, match="poses"):
         residual_figure(cal, q[:-1])
+
+
+def test_the_residual_table_refuses_distances_in_one_line():
+    from casecal.identification.distances import identify_distances, simulate_distances
+
+    robot = cc.load_robot("puma560")
+    q = cc.poses.uniform(robot, 60, seed=0)
+    pairs = np.array([(i, (7 * i + 3) % 60) for i in range(60) if i != (7 * i + 3) % 60])
+    meas = simulate_distances(robot.with_deviations({"a2": 2e-4}), q, pairs, 1e-5, seed=1)
+    cal = identify_distances(robot, meas, ["a2", "a3", "d3"])
+    with pytest.raises(cc.CalibrationError, match="measured distances"):
+        cal.residual_table()

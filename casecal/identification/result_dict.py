@@ -115,7 +115,15 @@ def residual_rows(cal: Calibration) -> pd.DataFrame:
 
     before, after = cal.residuals_before, cal.residuals
     rows = after.shape[0]
-    per_pose = max(rows // max(cal.n_poses, 1), 1)
+    if cal.measured != "points" or after.shape[1:] != (3,) or rows % max(cal.n_poses, 1):
+        from ..errors import CalibrationError
+
+        # pairs of poses (distances) or a camera's corners: rows that name no single pose
+        raise CalibrationError(
+            f"the residual table is of measured points, one or more per pose; this "
+            f"calibration measured {cal.measured}: see its summary and `residuals`"
+        )
+    per_pose = rows // cal.n_poses
     index = np.arange(rows)
     pose, point = index // per_pose, index % per_pose
     data = {"pose": pose, "point": point}
