@@ -205,6 +205,7 @@ def test_a_target_the_calibrated_tree_cannot_reach_is_reported(tmp_path):
     assert out.position_error[0] > 0.5 * (r_nominal - r_real)
 
 
+@pytest.mark.slow  # 12 s; the command-line test below runs the same robots on 8 poses
 def test_the_elastic_humanoid_reaches_the_nominal_tips_with_controller_joints():
     """The study's humanoid: 18 model joints, a passive torso joint coupled to two others
     (17 controller joints), masses, joint and lateral compliance. Targets commanded on the

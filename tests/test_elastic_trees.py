@@ -94,7 +94,10 @@ def test_two_arms_torsion_and_bending_match_reference(tmp_path):
     }
 
 
-@pytest.mark.parametrize("seed", [101, 102, 103])
+# one seed in the default run; the others with -m slow
+@pytest.mark.parametrize(
+    "seed", [101, *(pytest.param(s, marks=pytest.mark.slow) for s in (102, 103))]
+)
 def test_random_tree_torsion_and_bending_match_reference(tmp_path, seed):
     text, tips = er.random_tree_urdf(np.random.default_rng(seed))
     robot, tree = _load(tmp_path, text, tips)
@@ -269,7 +272,7 @@ def test_torsion_matches_rtb_potential_on_any_chain(tmp_path, seed):
 
 
 # ---------------------------------------------------------------- 4. exact Jacobians
-@pytest.mark.parametrize("seed", [61, 62])
+@pytest.mark.parametrize("seed", [61, pytest.param(62, marks=pytest.mark.slow)])
 def test_jacobian_of_compliances_matches_differences(tmp_path, seed):
     rng = np.random.default_rng(seed)
     text, tips = er.random_tree_urdf(rng)
@@ -390,7 +393,7 @@ def test_one_tip_of_two_arms_still_carries_the_other_arm(tmp_path):
     assert np.abs(got - want).max() < 1e-10
 
 
-@pytest.mark.parametrize("seed", [401, 402])
+@pytest.mark.parametrize("seed", [401, pytest.param(402, marks=pytest.mark.slow)])
 def test_one_tip_of_a_random_tree_matches_reference(tmp_path, seed):
     text, tips = er.random_tree_urdf(np.random.default_rng(seed))
     path = tmp_path / "tree.urdf"

@@ -14,6 +14,7 @@ import time
 import numpy as np
 import pandas as pd
 import pytest
+from processes import wait_until_loaded
 
 import casecal as cc
 from casecal.cli import main
@@ -161,7 +162,8 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
         str(out),
     ]
     proc = subprocess.Popen(run, stderr=subprocess.PIPE, text=True)
-    time.sleep(2.0)  # past Python's own start-up, into casecal's work
+    wait_until_loaded(proc)  # past Python's own start-up, into casecal's imports
+    time.sleep(0.5)
     proc.send_signal(signal.SIGINT)
     err = proc.communicate(timeout=60)[1]
     assert proc.returncode == 130, err

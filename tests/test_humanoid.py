@@ -197,6 +197,7 @@ def test_the_elastic_humanoid_fits_as_well_as_the_published_rigid_model(robot, t
     _check_elastic(rows)
 
 
+@pytest.mark.slow  # 37 s: 195 parameters from 500 poses
 def test_joint_and_lateral_compliance_reach_the_floor_on_the_stand_in(tmp_path):
     """Issue 22: the stand-in's own elasticity (numpy, no casecal) fitted by casecal's
     joint and lateral compliance on the tree, from the user's CSV: the held-out error

@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import wait_until_loaded
 
 from casecal.cli import main
 from casecal.report.folder import building_folder, publish
@@ -210,7 +211,8 @@ def test_ctrl_c_while_a_large_csv_is_parsed_is_an_interrupt(tmp_path):
             proc = subprocess.Popen(
                 argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
             )
-            time.sleep(rng.uniform(1.5, 3.5))  # after the imports, around the parse
+            wait_until_loaded(proc)
+            time.sleep(rng.uniform(0.0, 2.0))  # during the imports, around the parse
             proc.send_signal(signal.SIGINT)
             err = proc.communicate(timeout=120)[1]
             if proc.returncode == 0:
