@@ -201,3 +201,21 @@ def test_a_sigma_far_too_large_fails_and_says_so():
     conservative = cc.identify(robot, meas, "all", noise=0.04e-3)
     assert conservative.success, conservative.message
     assert held_out_rms(conservative, true) < 0.03e-3
+
+
+def test_smoothness_equals_brute_force_nearest_neighbours_with_copied_rows():
+    """The k-d tree's shortcut (2 neighbours, 8 only behind a copy) against every pair."""
+    from casecal.identification.audit import smoothness
+
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-2, 2, size=(200, 6))
+    r = rng.normal(size=(len(q), 3)) + 0.5 * np.sin(q[:, :3])
+    # rows copied once and twice, as a file might; a copy's residual is its original's,
+    # so which of two equally near copies is taken does not matter
+    q, r = np.vstack([q, q[:40], q[:5]]), np.vstack([r, r[:40], r[:5]])
+    z = (q - q.min(axis=0)) / np.ptp(q, axis=0)
+    d = np.linalg.norm(z[:, None] - z[None], axis=2)
+    d[d == 0] = np.inf  # itself and its copies are no neighbours
+    nearest = d.argmin(axis=1)
+    expected = np.mean(np.sum((r - r[nearest]) ** 2, axis=1)) / (2 * np.mean(np.sum(r**2, 1)))
+    assert smoothness(q, r) == pytest.approx(expected, rel=1e-12)

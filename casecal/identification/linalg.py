@@ -75,6 +75,22 @@ class Reduction:
         return cls.empty(J.shape[1]).fold(J, r)
 
     @classmethod
+    def of_blocks(cls, blocks, r: np.ndarray) -> Reduction:
+        """`of` for a J given as column blocks side by side (rows × k_i each), written
+        once into the factor's work array: no stacked copy of the tall J."""
+        m, k = len(r), sum(b.shape[1] for b in blocks)
+        work = np.empty((max(m, k + 1), k + 1), order="F")
+        work[m:] = 0.0  # zero rows change no R factor
+        start = 0
+        for b in blocks:
+            work[:m, start : start + b.shape[1]] = b
+            start += b.shape[1]
+        work[:m, k] = r
+        Ra = _r_factor(work)
+        t = min(m, k)
+        return cls(Ra[:t, :k], Ra[:t, k], float(r @ r), m)
+
+    @classmethod
     def from_normal(cls, G: np.ndarray, g: np.ndarray, rr: float, rows: int) -> Reduction | None:
         """The reduction with ``RᵀR = G = JᵀJ`` and ``Rᵀ Qᵀr = g = Jᵀr`` (Cholesky of the
         column-scaled G), or None where the normal equations would lose too much.
