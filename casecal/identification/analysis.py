@@ -387,19 +387,20 @@ def _base_parameters(
     """
     if rank == 0:
         return ()
-    basis = np.zeros((Js.shape[0], 0))
+    room = np.zeros((Js.shape[0], min(Js.shape))) if Js.size else np.zeros((Js.shape[0], 0))
     chosen = []
     order = [names.index(n) for n in prefer]
     order += [i for i in pivot_order(names) if names[i] not in prefer]
     for i in order:
         if zero[i]:
             continue
+        basis = room[:, : len(chosen)]  # the kept columns, orthonormal
         v = Js[:, i].copy()
         for _ in range(2):
             v -= basis @ (basis.T @ v)
         norm = np.linalg.norm(v)
-        if norm > threshold:
-            basis = np.column_stack([basis, v / norm])
+        if norm > threshold and len(chosen) < room.shape[1]:
+            room[:, len(chosen)] = v / norm
             chosen.append(names[i])
     if len(chosen) != rank:
         import scipy.linalg  # rarely needed, slow to import

@@ -145,12 +145,13 @@ def _columns(problem: Problem, joint_types: str, h: float = 1e-6) -> np.ndarray:
     q = problem.q
     n, dof, points = len(q), len(joint_types), 3 * problem.m
     moved = np.empty((n, points, dof))
-    for j in range(dof):  # ∂(measured points)/∂q_j by central differences
+    # ∂(measured points)/∂q_j by forward differences: the basis is a generic smooth error,
+    # and a column off by 1e-6 of itself moves no projection the F test could notice
+    here = problem.model_at(q)
+    for j in range(dof):
         step = np.zeros(q.shape[1])
         step[j] = h
-        plus = problem.model_at(q + step)
-        minus = problem.model_at(q - step)
-        moved[:, :, j] = (plus - minus) / (2 * h)
+        moved[:, :, j] = (problem.model_at(q + step) - here) / h
     functions = joint_functions(q[:, :dof], joint_types)
     X = np.stack([moved[:, :, j] * values[:, None] for j, values in functions], axis=2)
     return (X * problem.w_rows[:, :points, None]).reshape(n * points, -1)
