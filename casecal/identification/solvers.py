@@ -61,6 +61,12 @@ CLOSE = 0.05
 many residual variances (well within the audit's bar); otherwise LM takes over."""
 
 
+WATCH = 1.0
+"""Residual variances per estimated parameter a Gauss-Newton step may promise at most for
+its overshoot to be taken on watch (`_gauss_newton`). Far from the bottom, where a long
+step may cross into another basin (a camera turned half a turn), it is halved at once."""
+
+
 def _variance(problem: Problem, cost: float) -> float:
     """The residual variance (in the cost's units) at `cost`: 2 cost / (rows - k)."""
     dof = np.count_nonzero(problem.w_flat) - len(problem.names)  # rows not measured: none
@@ -69,28 +75,39 @@ def _variance(problem: Problem, cost: float) -> float:
 
 def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
     x, r, cost, history, floor = _start(problem, x0)
-    crawling = False  # the last full step was too long: the next one likely is too
+    # Near the bottom (a step promising at most `WATCH` residual variances a parameter),
+    # a full step that raises the cost is taken once, on watch, and judged by the step
+    # after it (Chamberlain's watchdog): along a curved, nearly blind valley the second
+    # full step lands below where the first began, where halving the first crawls for
+    # ten iterations. If it does not, the fit goes back and halves the first step.
+    watch = None  # (x, r, cost, step) where the step on watch began
     for it in range(1, max_iterations + 1):
         linear = problem.reduced(x, r, exact=False)
         step, predicted = gauss_newton_step(linear)
         done = _converged(predicted, cost, tolerance, floor)
-        t = 1.0
-        while True:  # halve the step until the cost goes down (damped Gauss-Newton)
-            x_new = x + t * step
-            # a full step not yet converged is usually taken: its Jacobian comes too, but
-            # not along a curved valley, where full steps overshoot one after another
-            r_new = problem.residual(x_new, ahead=t == 1.0 and not done and not crawling)
-            cost_new = 0.5 * r_new @ r_new
-            if cost_new < cost or t < 1e-3 or done:
-                break
-            t *= 0.5
-        crawling = t < 1.0
-        if cost_new < cost:
+        before = cost if watch is None else watch[2]  # the cost to beat
+        x_new, t = x + step, 1.0
+        r_new = problem.residual(x_new, ahead=not done)  # its Jacobian comes too
+        cost_new = 0.5 * r_new @ r_new
+        bottom = predicted <= WATCH * len(step) * _variance(problem, cost)
+        if watch is None and bottom and not done and np.isfinite(cost_new) and cost_new >= cost:
+            watch = (x, r, cost, step)
+            x, r, cost = x_new, r_new, cost_new
+            history.append(cost)
+            if callback is not None:
+                callback(it, cost)
+            continue
+        elif not cost_new < before:  # halve the step until the cost goes down
+            if watch is not None:  # back to where the step on watch began
+                x, r, cost, step = watch
+            x_new, r_new, cost_new, t = _halved(problem, x, step, cost, done)
+        watch = None
+        if cost_new < before:
             norms = linear.norms
             small = np.linalg.norm(t * step * norms) <= tolerance * (
                 np.linalg.norm(x * norms) + tolerance
             )
-            stalled = cost - cost_new <= STALL * _variance(problem, cost_new)
+            stalled = before - cost_new <= STALL * _variance(problem, cost_new)
             x, r, cost = x_new, r_new, cost_new
             history.append(cost)
             if callback is not None:
@@ -105,7 +122,23 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
         else:
             history.append(cost)
             return x, it, 2 if done else 3, history, None
+    if watch is not None and not cost < watch[2]:  # out of iterations on watch
+        x, cost = watch[0], watch[2]
+        history[-1] = cost
     return x, max_iterations, 0, history, None
+
+
+def _halved(problem: Problem, x, step, cost: float, done: bool):
+    """The damped Gauss-Newton trial: ``x + t step`` for t = 1/2, 1/4, … until the cost
+    goes below `cost` (or t < 1e-3, or at once when `done`); (x, r, cost, t) there."""
+    t = 0.5
+    while True:
+        x_new = x + t * step
+        r_new = problem.residual(x_new)
+        cost_new = 0.5 * r_new @ r_new
+        if cost_new < cost or t < 1e-3 or done:
+            return x_new, r_new, cost_new, t
+        t *= 0.5
 
 
 def _levenberg_marquardt(problem: Problem, x0, max_iterations, tolerance, callback=None, **_):
