@@ -8,6 +8,8 @@ start, and no iterate is lost.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -62,5 +64,5 @@ def test_some_of_these_problems_take_a_step_on_watch():
     rose = 0
     for seed in range(200):
         history = solvers._gauss_newton(Curved(seed), np.zeros(4), 50, 1e-12)[3]
-        rose += any(b > a for a, b in zip(history, history[1:]))
+        rose += any(b > a for a, b in itertools.pairwise(history))
     assert rose >= 5
