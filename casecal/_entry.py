@@ -6,6 +6,7 @@ loaded machine; an interrupt in that second must end as quietly as one later on.
 
 from __future__ import annotations
 
+import os
 import sys
 
 
@@ -16,5 +17,10 @@ def main(argv: list[str] | None = None) -> int:
 
         return run(argv)
     except KeyboardInterrupt:  # during the imports; the command catches its own
-        print("casecal: interrupted; nothing was written", file=sys.stderr)
-        return 130
+        print("casecal: interrupted; nothing was written", file=sys.stderr, flush=True)
+        # An interrupt that landed in code an extension module runs while it is imported
+        # (PyRun_String) marks itself unhandled inside CPython even once caught here, and
+        # the interpreter would then end by SIGINT (-2 to a parent, not 130). Nothing has
+        # been started or written yet, so leave at once with the code.
+        sys.stdout.flush()
+        os._exit(130)

@@ -171,6 +171,28 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow
+def test_ctrl_c_at_any_moment_of_the_start_up_is_exit_130(tmp_path):
+    """SIGINT at random moments of the first 3 s (Python's start-up, the imports, the
+    work). Caught during an extension's import, it had ended the process by SIGINT (-2)
+    after printing the right line: 2 in 25 such runs."""
+    import random
+
+    rng = random.Random(11)
+    out = tmp_path / "big.csv"
+    run = [sys.executable, "-m", "casecal", "simulate", "puma560", "--poses", "3000000"]
+    for _ in range(25):
+        proc = subprocess.Popen([*run, "-o", str(out)], stderr=subprocess.PIPE, text=True)
+        time.sleep(rng.uniform(0.3, 3.0))
+        proc.send_signal(signal.SIGINT)
+        err = proc.communicate(timeout=120)[1]
+        if proc.returncode == 0:
+            continue
+        assert proc.returncode == 130, err
+        assert err == "casecal: interrupted; nothing was written\n"
+        assert not out.exists()
+
+
 def test_system_errors_are_one_line_exit_2(tmp_path, monkeypatch, capsys):
     from casecal import textio
 
