@@ -24,9 +24,11 @@ def wait_until_loaded(proc: subprocess.Popen, library: str = "casadi", seconds: 
     while time.monotonic() < deadline:
         assert proc.poll() is None, f"the process ended ({proc.returncode}) before loading"
         try:
-            if library in maps.read_text():
+            if f"/{library}" in maps.read_text():  # a path component, not any name
                 return
         except OSError:  # between exit and reaping
             pass
         time.sleep(0.02)
+    proc.kill()  # no child left running behind a failed test
+    proc.wait()
     raise AssertionError(f"{library} not loaded within {seconds:.0f} s")

@@ -66,3 +66,28 @@ def test_some_of_these_problems_take_a_step_on_watch():
         history = solvers._gauss_newton(Curved(seed), np.zeros(4), 50, 1e-12)[3]
         rose += any(b > a for a, b in itertools.pairwise(history))
     assert rose >= 5
+
+
+class Cubic:
+    """One parameter whose full step from 0 lands on a stationary point of a higher cost
+    (a reviewer's case): residual ``[u(x), 1 × 100]``, ``u = 1 - x + 3.5x² - 2x³``."""
+
+    names = ("x",)
+    w_flat = np.ones(101)
+    y = np.ones(101)
+
+    def u(self, x):
+        return 1 - x + 3.5 * x**2 - 2 * x**3
+
+    def residual(self, x, ahead=False):
+        return np.r_[self.u(x[0]), np.ones(100)]
+
+    def reduced(self, x, r=None, exact=True):
+        slope = -1 + 7 * x[0] - 6 * x[0] ** 2
+        return Reduction.of(np.r_[-slope, np.zeros(100)][:, None], self.residual(x))
+
+
+def test_a_watched_step_that_lands_on_a_stationary_point_is_not_called_converged():
+    x, _, status, history, _ = solvers._gauss_newton(Cubic(), np.zeros(1), 50, 1e-8)
+    assert status != 2 or abs(Cubic().u(x[0]) * (-1 + 7 * x[0] - 6 * x[0] ** 2)) < 1e-6
+    assert history[-1] < history[0]  # it went back and halved (t = 1/4 lowers the cost)

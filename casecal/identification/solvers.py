@@ -80,28 +80,31 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
     # after it (Chamberlain's watchdog): along a curved, nearly blind valley the second
     # full step lands below where the first began, where halving the first crawls for
     # ten iterations. If it does not, the fit goes back and halves the first step.
-    watch = None  # (x, r, cost, step) where the step on watch began
+    watch = None  # (x, r, cost, step, predicted, linear) where the step on watch began
+    crawling = False  # the last step was halved: the next full one likely overshoots too
     for it in range(1, max_iterations + 1):
         linear = problem.reduced(x, r, exact=False)
         step, predicted = gauss_newton_step(linear)
         done = _converged(predicted, cost, tolerance, floor)
+        bottom = predicted <= WATCH * len(step) * _variance(problem, cost)
         before = cost if watch is None else watch[2]  # the cost to beat
         x_new, t = x + step, 1.0
-        r_new = problem.residual(x_new, ahead=not done)  # its Jacobian comes too
+        # a full step likely taken comes with its Jacobian; not one likely halved
+        r_new = problem.residual(x_new, ahead=not done and (bottom or not crawling))
         cost_new = 0.5 * r_new @ r_new
-        bottom = predicted <= WATCH * len(step) * _variance(problem, cost)
         if watch is None and bottom and not done and np.isfinite(cost_new) and cost_new >= cost:
-            watch = (x, r, cost, step)
+            watch = (x, r, cost, step, predicted, linear)
             x, r, cost = x_new, r_new, cost_new
             history.append(cost)
             if callback is not None:
                 callback(it, cost)
             continue
-        elif not cost_new < before:  # halve the step until the cost goes down
-            if watch is not None:  # back to where the step on watch began
-                x, r, cost, step = watch
-            x_new, r_new, cost_new, t = _halved(problem, x, step, cost, done)
-        watch = None
+        if not cost_new < before and (watch is not None or not done):
+            if watch is not None:  # back to where the step on watch began (not done there)
+                x, r, cost, step, predicted, linear = watch
+                done = False
+            x_new, r_new, cost_new, t = _halved(problem, x, step, cost)
+        watch, crawling = None, t < 1.0
         if cost_new < before:
             norms = linear.norms
             small = np.linalg.norm(t * step * norms) <= tolerance * (
@@ -122,21 +125,23 @@ def _gauss_newton(problem: Problem, x0, max_iterations, tolerance, callback=None
         else:
             history.append(cost)
             return x, it, 2 if done else 3, history, None
-    if watch is not None and not cost < watch[2]:  # out of iterations on watch
+    if watch is not None:  # out of iterations on watch: where it began, cost lower
         x, cost = watch[0], watch[2]
         history[-1] = cost
+        if callback is not None:
+            callback(max_iterations, cost)
     return x, max_iterations, 0, history, None
 
 
-def _halved(problem: Problem, x, step, cost: float, done: bool):
+def _halved(problem: Problem, x, step, cost: float):
     """The damped Gauss-Newton trial: ``x + t step`` for t = 1/2, 1/4, … until the cost
-    goes below `cost` (or t < 1e-3, or at once when `done`); (x, r, cost, t) there."""
+    goes below `cost` (or t < 1e-3); (x, r, cost, t) there."""
     t = 0.5
     while True:
         x_new = x + t * step
         r_new = problem.residual(x_new)
         cost_new = 0.5 * r_new @ r_new
-        if cost_new < cost or t < 1e-3 or done:
+        if cost_new < cost or t < 1e-3:
             return x_new, r_new, cost_new, t
         t *= 0.5
 
