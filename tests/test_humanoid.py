@@ -168,10 +168,11 @@ def test_without_elasticity_the_humanoid_reaches_the_noise_floor(robot, tmp_path
 
 
 def _check_elastic(rows):
+    # as well as the published rigid model, whose 10.5 mm is one figure for the model: the
+    # mean over the splits (one split's own held-out error ranges 9.9-10.6 mm over 10)
+    assert np.mean([held for held, *_ in rows]) <= H.PUBLISHED_RIGID_MM * 1e-3
     for held, _, cal, _ in rows:
-        # as well as the published rigid model, and far from the noise: the model error
-        assert held <= H.PUBLISHED_RIGID_MM * 1e-3
-        assert held > 4 * FLOOR
+        assert held > 4 * FLOOR  # far from the noise: the model error
         assert not cal.success  # the residuals exceed the noise: not a success
         # a fitted robot all the same (the rounds that ran out did not return the start)
         assert cal.rms < 0.3 * cal.rms_before
