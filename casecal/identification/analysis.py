@@ -387,14 +387,14 @@ def _base_parameters(
     """
     if rank == 0:
         return ()
-    room = np.zeros((Js.shape[0], min(Js.shape))) if Js.size else np.zeros((Js.shape[0], 0))
+    room = np.zeros((Js.shape[0], min(Js.shape)))  # the kept columns, filled in order
     chosen = []
     order = [names.index(n) for n in prefer]
     order += [i for i in pivot_order(names) if names[i] not in prefer]
     for i in order:
         if zero[i]:
             continue
-        basis = room[:, : len(chosen)]  # the kept columns, orthonormal
+        basis = room[:, : len(chosen)]  # orthonormal
         v = Js[:, i].copy()
         for _ in range(2):
             v -= basis @ (basis.T @ v)

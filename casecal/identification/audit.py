@@ -437,7 +437,7 @@ def smoothness(q: np.ndarray, residuals: np.ndarray, seed: int = 0) -> float | N
     d, index = tree.query(z, k=min(n, 2))
     nearest, has = index[:, -1], d[:, -1] > 0
     copies = np.flatnonzero(~has)
-    if copies.size and n > 2:
+    if copies.size:  # n >= 12 here
         d, index = tree.query(z[copies], k=min(n, 8))
         first = np.argmax(d > 0, axis=1)
         rows = np.arange(copies.size)
