@@ -165,3 +165,35 @@ def test_a_result_file_never_replaces_the_measurements(calibrated, tmp_path, opt
     both = casecal("identify", "kr16_2", "m.csv", "-o", "x.toml", option, "x.toml",
                    cwd=tmp_path)  # fmt: skip
     assert both.returncode != 0 and "both name" in both.stderr
+
+
+def test_programs_keep_a_byte_order_mark_first_and_undefined_bytes_and_need_targets(calibrated):
+    """A RAPID module saved with a UTF-8 BOM keeps it as its first bytes (the header comes
+    after it, not before); a KRL file with a byte cp1252 leaves undefined (a GBK comment)
+    keeps it; a file with no joint target is refused in one line, nothing written."""
+    folder, _, _, _, run = calibrated
+    assert run.returncode == 0, run.stderr
+    rapid = (
+        "MODULE M\r\n  CONST jointtarget j1 := [[10,20,30,40,50,60],"
+        "[9E9,9E9,9E9,9E9,9E9,9E9]];\r\nENDMODULE\r\n"
+    )
+    (folder / "bom.mod").write_bytes(b"\xef\xbb\xbf" + rapid.encode())
+    out = casecal("compensate", "cal.toml", "--program", "bom.mod", "-o", "bom_new.mod",
+                  cwd=folder)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    new = (folder / "bom_new.mod").read_bytes()
+    assert new.startswith(b"\xef\xbb\xbfMODULE M\r\n") and new.count(b"\xef\xbb\xbf") == 1
+    krl = (
+        "DEFDAT cell\r\n; Kommentar \x81\r\n"
+        "DECL E6AXIS P1={A1 10,A2 -90,A3 90,A4 0,A5 30,A6 0}\r\nENDDAT\r\n"
+    )
+    (folder / "gbk.dat").write_bytes(krl.encode("latin-1"))
+    out = casecal("compensate", "cal.toml", "--program", "gbk.dat", "-o", "gbk_new.dat",
+                  cwd=folder)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    assert b"; Kommentar \x81\r\n" in (folder / "gbk_new.dat").read_bytes()
+    (folder / "none.script").write_text('def main():\n  textmsg("no targets")\nend\n')
+    out = casecal("compensate", "cal.toml", "--program", "none.script", "-o", "none_new.script",
+                  cwd=folder)  # fmt: skip
+    assert out.returncode == 2 and out.stderr.count("\n") == 1, out.stderr
+    assert "no joint targets found" in out.stderr and not (folder / "none_new.script").exists()

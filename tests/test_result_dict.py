@@ -69,6 +69,9 @@ def test_the_residual_plot_marks_what_stands_out(fitted, tmp_path):
     assert imread(png).shape[0] > 300
     with pytest.raises(ValueError, match="poses"):
         residual_figure(cal, q[:-1])
+    # a file's per-pose inputs (payload_kg) after the joints: one panel per joint still
+    with_inputs = np.hstack([q, np.full((len(q), 1), 5.0)])
+    assert len(residual_figure(cal, with_inputs).axes) == 2 + robot.dof
 
 
 def test_the_residual_table_refuses_distances_in_one_line():

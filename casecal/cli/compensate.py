@@ -133,7 +133,8 @@ def run_program(args: argparse.Namespace, calibrated, nominal) -> None:
     try:
         text, encoding = data.decode("utf-8"), "utf-8"
     except UnicodeDecodeError:
-        text, encoding = data.decode("cp1252"), "cp1252"
+        # bytes cp1252 leaves undefined (a GBK comment's 0x81) are kept as they were
+        text, encoding = data.decode("cp1252", "surrogateescape"), "cp1252"
     # identify writes a robot file only once its audit passed; a file without that record
     # (calibrated_from) is not known to be a calibration
     verdict = (
@@ -142,11 +143,18 @@ def run_program(args: argparse.Namespace, calibrated, nominal) -> None:
         else "unknown (the file records no calibration)"
     )
     header = calibration_header(args.robot, verdict) if os.path.isfile(args.robot) else None
+    if header is not None:  # a file name the program's encoding cannot hold: '?' there
+        header = header.encode(encoding, "replace").decode(encoding)
     orientation = False if args.position_only else None
     result = compensate_program(
         calibrated, text, fmt, nominal, header=header, frame=args.frame, orientation=orientation
     )
-    write_atomic(args.output, result.text.encode(encoding))
+    if result.compensation is None and not result.skipped:
+        raise CalibrationError(
+            f"no joint targets found in {args.program!r} read as {fmt}; nothing written "
+            "(check --format, and that the file is text in UTF-8 or Windows-1252)"
+        )
+    write_atomic(args.output, result.text.encode(encoding, "surrogateescape"))
     if args.json:
         left = [{"line": line, "reason": reason} for line, reason in result.skipped]
         write_json(args.json, _summary(args, len(result.changed) + len(left), left))

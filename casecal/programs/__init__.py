@@ -222,12 +222,14 @@ def _with_header(text: str, module, header: str) -> str:
     """`text` with the header comment as a line of its own where `module` puts it."""
     if "\n" in header or "\r" in header:
         raise CalibrationError("the program header must be one line; remove its line breaks")
+    bom = "\ufeff" if text.startswith("\ufeff") else ""  # stays first, before the header
+    text = text[len(bom) :]
     at = module.header_at(text)
     newline = "\r\n" if "\r\n" in text else "\n"
     if at > 0 and not text[:at].endswith("\n"):
         text, at = text + newline, at + len(newline)
     indent = re.match(r"[ \t]*", text[at:]).group()
-    return f"{text[:at]}{indent}{module.COMMENT} {MARK}: {header}{newline}{text[at:]}"
+    return f"{bom}{text[:at]}{indent}{module.COMMENT} {MARK}: {header}{newline}{text[at:]}"
 
 
 def _check_not_compensated(text: str, module) -> None:

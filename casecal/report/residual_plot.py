@@ -43,8 +43,10 @@ def residual_figure(cal, q: np.ndarray, joint_types: str | None = None):
     q = np.asarray(q, dtype=float)
     if q.shape[0] != before.size:
         raise ValueError(f"q has {q.shape[0]} poses; the calibration has {before.size}")
-    types = joint_types or cal.nominal.structure.joint_types
-    dof = q.shape[1]
+    # controller joints only: a file's per-pose inputs (payload_kg) follow them in q
+    types = joint_types or cal.nominal.controller_types
+    dof = len(types)
+    q = q[:, :dof]
     out = np.asarray(cal.outliers, dtype=int)
     columns = max(min(dof, 4), 2)
     rows = 1 + -(-dof // columns)
