@@ -17,6 +17,7 @@ from pathlib import Path
 
 from ._signals import held_signals
 from .errors import CalibrationError
+from .ownership import remember
 
 
 def read_text(path, what: str) -> str:
@@ -67,13 +68,14 @@ def write_together(files) -> None:
     of the user's umask, a replaced one keeps its own, and a target that is a symbolic link
     is written through: the file it points to is replaced. A character device or a
     FIFO (``/dev/null``, a named pipe, or a link to one) is written into, as the shell's
-    ``>`` does, never replaced; ``/dev/stdout``, ``/dev/stderr`` and ``/dev/fd/N`` are
-    written into the open descriptor (``>> log`` appends). A read-only file is refused,
+    ``>`` does, never replaced; ``-``, ``/dev/stdout``, ``/dev/stderr`` and ``/dev/fd/N``
+    are written into the open descriptor (``>> log`` appends). A read-only file is refused,
     as the shell refuses it. Temporary files that killed runs left beside a target are
     removed (only names of the pattern above whose process no longer runs on this host).
 
     Each file is recorded (see `recording`) the moment its rename is done, so an
-    interrupt can say truly what was written.
+    interrupt can say truly what was written, and registered as casecal's
+    (`casecal.ownership`), so that a command may replace it later.
 
     Parameters
     ----------
@@ -101,6 +103,9 @@ def write_together(files) -> None:
             for tmp, target in staged:
                 os.replace(tmp, target)
                 _done(renamed, target)
+        for target, text in targets:  # casecal's now: a later command may replace them
+            if not isinstance(target, int) and not _special(target):
+                remember(target, text if isinstance(text, bytes) else text.encode("utf-8"))
     except OSError as exc:
         done = f"; written: {', '.join(renamed)}" if renamed else "; no file was changed"
         name = exc.filename if exc.filename else ""
@@ -150,6 +155,8 @@ def _descriptor(path: str) -> int | None:
     """The open descriptor of this process that `path` names (``/dev/stdout``,
     ``/dev/fd/N``, ``/proc/self/fd/N``), or None. Written through the descriptor itself:
     resolving the link would rename over the file the shell opened (``>> log``)."""
+    if path == "-":  # as reading takes it for standard input
+        return 1
     match = _OPEN_DESCRIPTOR.fullmatch(os.path.normpath(path))
     if not match:
         return None
@@ -182,6 +189,12 @@ def _target(path) -> Path | int:
             f"{str(path)!r} is read-only; make it writable (chmod u+w) or give another name"
         )
     return path
+
+
+def written_into(path) -> bool:
+    """Whether `write_together` writes into `path` rather than replacing a file: ``-``,
+    an open descriptor (``/dev/stdout``), a FIFO or a character device (``/dev/null``)."""
+    return _descriptor(str(path)) is not None or _special(Path(path))
 
 
 def _special(path: Path) -> bool:

@@ -27,6 +27,7 @@ from processes import wait_until_loaded
 
 from casecal.cli import main
 from casecal.report.folder import building_folder, publish
+from casecal.textio import write_atomic
 
 SLOW_KILLS = 50
 DEV = ["--deviations-out", "dev.csv"]
@@ -77,7 +78,7 @@ def _kill_loop(argv, cwd: Path, outputs, old: dict, new: dict, kills: int, durat
     outcomes = {"old": 0, "new": 0}
     for k in range(kills):
         for name in outputs:
-            (cwd / name).write_bytes(old[name])
+            write_atomic(cwd / name, old[name])  # casecal's: a command may replace it
         proc = _start(argv, cwd)
         time.sleep(rng.uniform(0.5, 1.2) * duration)
         proc.send_signal(signal.SIGKILL if k % 2 else signal.SIGTERM)

@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from casecal.cli import main
+from casecal.textio import write_atomic
 
 USER_FILES = {
     "tracker_export.csv": b"x,y,z\n1,2,3\n",
@@ -235,7 +236,7 @@ def test_ctrl_c_while_a_csv_is_parsed_is_an_interrupt(tmp_path, measured, monkey
 
 def test_full_disk_names_the_file(tmp_path, monkeypatch, capsys):
     out = tmp_path / "out.csv"
-    out.write_text("old\n")
+    write_atomic(out, "old\n")  # casecal's own: a command may replace it
 
     class FullDisk:
         def __init__(self, fh):

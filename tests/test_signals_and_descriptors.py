@@ -46,7 +46,7 @@ def test_dev_stdout_into_a_pipe(tmp_path):
 
 def test_a_replaced_file_keeps_its_mode(tmp_path, capsys):
     out = tmp_path / "private.csv"
-    out.write_text("old")
+    textio.write_atomic(out, "old")  # casecal's own: a command may replace it
     out.chmod(0o600)
     assert main(["simulate", "rr", "--poses", "3", "-o", str(out)]) == 0
     assert stat.S_IMODE(out.stat().st_mode) == 0o600

@@ -1,5 +1,5 @@
 """What the ``casecal`` commands share: robot loading, the shared options, lengths and
-angles at the edge, output checks and the quiet/verbose switches.
+angles at the edge, and the quiet/verbose switches.
 
 A leaf of the command-line package: it imports no other module of `casecal.cli` except
 `casecal.cli.argtypes`.
@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import os
 import sys
 
 from ..errors import CalibrationError
@@ -60,7 +59,7 @@ def add_output_switches(p: argparse.ArgumentParser, default) -> None:
         action="store_true",
         default=False if default is not argparse.SUPPRESS else default,
         help="print only errors, warnings and what was asked for: the files written (a "
-        "pipe gets the CSV alone from simulate or compensate -o /dev/stdout) and the tables "
+        "pipe gets the CSV alone from simulate or compensate -o -) and the tables "
         "of robots, show, observability, validate and compare and of identify --holdout. "
         "Drops the fit summaries and 'written' lines on standard output, the report's "
         "progress, and the notes and fit progress lines on standard error",
@@ -164,27 +163,6 @@ def robot_for(args: argparse.Namespace, name: str):
     return robot
 
 
-def check_writable_dir(path) -> None:
-    """Make the output folder `path` if it is one new folder; refuse one that cannot be."""
-    from pathlib import Path
-
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise CalibrationError(f"{str(p)!r} is a file, not a folder; choose another output")
-    if not p.exists() and not p.absolute().parent.is_dir():
-        # one new folder is what was asked for; more is a mistyped path
-        raise CalibrationError(
-            f"cannot create output folder {str(p)!r}: {str(p.absolute().parent)!r} does not "
-            "exist either (check the path, or create the folders first)"
-        )
-    try:
-        p.mkdir(exist_ok=True)
-    except OSError as exc:
-        raise CalibrationError(f"cannot create output folder {str(p)!r}: {exc.strerror}") from None
-    if not os.access(p, os.W_OK):
-        raise CalibrationError(f"output folder {str(p)!r} is not writable; choose another with -o")
-
-
 PARAMS_HELP = (
     "parameters: names, families or 'all', comma-separated, e.g. "
     "'theta*,a*,d*' or '*.offset' (default: the paper's theta, a, d, a URDF robot's "
@@ -198,49 +176,6 @@ ROBOT_OUT_HELP = (
     "it replaces anything, what the format cannot hold said on standard error"
 )
 
-OUTPUTS = {
-    "output": "-o",
-    "out": "OUT",
-    "deviations_out": "--deviations-out",
-    "camera_out": "--camera-out",
-    "json": "--json",
-    "residuals": "--residuals",
-    "plot": "--plot",
-}
-"""The options that name files a command writes (``report -o`` names a folder)."""
-
-
-def check_outputs(args: argparse.Namespace) -> None:
-    """Refuse, before any work, an output file that is one of the command's input files
-    (writing it would replace the user's measurements or targets) or another output's
-    file (one would silently replace the other)."""
-    outputs = [(flag, getattr(args, dest, None)) for dest, flag in OUTPUTS.items()]
-    outputs = [(flag, str(path)) for flag, path in outputs if path and str(path) != "-"]
-    seen: dict[str, str] = {}
-    for flag, path in outputs:
-        key = os.path.realpath(path)
-        if key in seen:
-            raise CalibrationError(
-                f"{seen[key]} and {flag} both name {path!r}: one file would replace the "
-                "other; give each its own name"
-            )
-        seen[key] = flag
-        for dest, value in vars(args).items():
-            if dest in OUTPUTS or dest == "func" or not isinstance(value, str):
-                continue
-            if value != "-" and _same_file(path, value):
-                raise CalibrationError(
-                    f"{flag} {path!r} is also the file read as {dest.replace('_', ' ')}: "
-                    "writing it would replace that input; give the output another name"
-                )
-
-
-def _same_file(a: str, b: str) -> bool:
-    try:
-        return os.path.isfile(b) and os.path.samefile(a, b)
-    except OSError:  # `a` does not exist yet: a new file is no input
-        return False
-
 
 def one_line_warning(message, category, filename, lineno, file=None, line=None):
     """`warnings.showwarning` of the command: one line, no source location."""
@@ -253,7 +188,7 @@ def add_json_option(p) -> None:
         "--json",
         metavar="FILE",
         help="also write the result as one JSON object (keys in the README); "
-        "'/dev/stdout' for a pipe",
+        "'-' for standard output",
     )
 
 

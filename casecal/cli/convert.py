@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import os
 
 from ..errors import CalibrationError
 from ..textio import write_atomic
-from .common import add_robot_options, check_writable_dir, command, robot_for, say
+from .common import add_robot_options, command, robot_for, say
 from .writing import how_to_load, say_notes
 
 
@@ -47,7 +46,6 @@ def run(args: argparse.Namespace) -> None:
             f"{args.out}: {out.statement}; not written: convert writes exact copies only "
             "(convert to .toml, which holds everything)"
         )
-    check_writable_dir(os.path.dirname(os.path.abspath(args.out)))
     say_notes(args.out, out)
     write_atomic(args.out, out.text)
     say(f"{robot.name} written to {args.out} ({how_to_load(args.out, robot)})")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 
 from ..data.files import read_csv
 from ..errors import CalibrationError
@@ -15,7 +14,6 @@ from .common import (
     PARAMS_HELP,
     ROBOT_OUT_HELP,
     add_robot_options,
-    check_writable_dir,
     command,
     json_text,
     parse_angle,
@@ -90,7 +88,7 @@ def _add_result_options(p: argparse.ArgumentParser) -> None:
         "--json",
         metavar="FILE",
         help="write the whole result as one JSON object (keys in the README: verdict, "
-        "errors in mm, each parameter in its unit, audit checks); '/dev/stdout' for a pipe",
+        "errors in mm, each parameter in its unit, audit checks); '-' for standard output",
     )
     p.add_argument(
         "--residuals",
@@ -215,11 +213,6 @@ def run(args: argparse.Namespace) -> None:
             )
         return identify_distances(args, robot)
     meas = read_csv(args.measurements, robot)
-    for out in (args.output, args.deviations_out, args.json, args.residuals, args.plot):
-        if out is not None and not out.strip():
-            raise CalibrationError("an output file name is empty; give a file name")
-        if out:  # fail before the work, not after it
-            check_writable_dir(os.path.dirname(os.path.abspath(out)))
     check_robot_format(args, robot)
     noise = parse_length(args.noise) if args.noise is not None else None
     truth = load_deviations(args.truth, robot) if args.truth else None

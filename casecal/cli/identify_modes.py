@@ -4,12 +4,11 @@ pixels, beside identify's fit of positions (`casecal.cli.identify`)."""
 from __future__ import annotations
 
 import argparse
-import os
 
 from ..errors import CalibrationError
 from ..identification.fit import identify
 from ..identification.validation import split, validate
-from .common import check_writable_dir, say
+from .common import say
 from .writing import check_fit, check_robot_format, write_calibrated, write_outputs
 
 
@@ -47,8 +46,6 @@ def identify_distances(args: argparse.Namespace, robot) -> None:
     """identify --pairs: the measurement file's rows are joined by measured distances."""
     from ..identification import distances
 
-    if args.output:
-        check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
     meas = distances.read_distance_csv(args.measurements, args.pairs, robot)
     method = "gauss-newton" if args.method == "ipopt" else args.method
     cal = distances.identify_distances(
@@ -83,11 +80,6 @@ def identify_camera(args: argparse.Namespace, robot) -> None:
         raise CalibrationError(
             f"--camera-out {args.camera_out}: a camera file is TOML; name it .toml"
         )
-    for out in (args.output, args.deviations_out, args.camera_out):
-        if out is not None and not out.strip():
-            raise CalibrationError("an output file name is empty; give a file name")
-        if out:
-            check_writable_dir(os.path.dirname(os.path.abspath(out)))
     check_robot_format(args, robot)
     sigma = None if args.sigma_px is None else float(args.sigma_px)
     setup, placements = read_cameras(args.camera)

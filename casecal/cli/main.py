@@ -26,7 +26,8 @@ from . import (
     simulate,
     validate,
 )
-from .common import Output, add_output_switches, check_outputs, one_line_warning
+from .common import Output, add_output_switches, one_line_warning
+from .outputs import OUTPUTS, OVERWRITE_HELP, check_outputs
 
 COMMANDS = (show, simulate, identify, calibrate_until, validate, compensate, compare, convert)
 """The command modules, in the order of ``casecal --help`` (report last)."""
@@ -55,6 +56,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for module in (*COMMANDS, report):
         module.add_parser(sub)
+    for name, command in sub.choices.items():
+        # every command that writes files may be told to replace one casecal did not write
+        # (the report's folder keeps the user's files whatever it is told)
+        if name != "report" and any(a.dest in OUTPUTS for a in command._actions):
+            command.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return parser
 
 

@@ -4,7 +4,6 @@ schedule, measured (simulated) or judged for what it can identify."""
 from __future__ import annotations
 
 import argparse
-import os
 
 import numpy as np
 
@@ -18,7 +17,6 @@ from .common import (
     PARAMS_HELP,
     add_json_option,
     add_robot_options,
-    check_writable_dir,
     command,
     parse_length,
     robot_for,
@@ -106,9 +104,6 @@ def schedule(robot, args):
 def run(args: argparse.Namespace) -> None:
     """``casecal simulate``: the measurement CSV of a robot with deviations."""
     robot = robot_for(args, args.robot)
-    if not args.output.strip():
-        raise CalibrationError("the output file name is empty; give a file name with -o")
-    check_writable_dir(os.path.dirname(os.path.abspath(args.output)))
     deviations = load_deviations(args.deviations, robot) if args.deviations else {}
     true = robot.with_deviations(deviations)
     q = schedule(robot, args)

@@ -35,6 +35,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .._cache import cache_dir
 from . import _trig
 
 log = logging.getLogger(__name__)
@@ -81,16 +82,6 @@ int casecal_batch(const casadi_real* q, const casadi_real* p, casadi_real* out,
   return 0;
 }}
 """
-
-
-def cache_dir() -> Path:
-    """Where compiled kernels live: ``$CASECAL_CACHE``, else ``~/.cache/casecal``.
-
-    Always an absolute path: dlopen searches the library path, not the working folder, for
-    a name without a slash (``CASECAL_CACHE=.`` built kernels it then could not load).
-    """
-    folder = os.environ.get("CASECAL_CACHE") or str(Path.home() / ".cache" / "casecal")
-    return Path(os.path.abspath(os.path.expanduser(folder)))
 
 
 def compiler() -> str | None:
