@@ -197,3 +197,14 @@ def test_programs_keep_a_byte_order_mark_first_and_undefined_bytes_and_need_targ
                   cwd=folder)  # fmt: skip
     assert out.returncode == 2 and out.stderr.count("\n") == 1, out.stderr
     assert "no joint targets found" in out.stderr and not (folder / "none_new.script").exists()
+
+
+def test_compensated_targets_are_not_compensated_twice(calibrated):
+    folder, _, _, _, run = calibrated
+    assert run.returncode == 0, run.stderr
+    once = casecal("compensate", "cal.toml", "m.csv", "-o", "once.csv", cwd=folder)
+    assert once.returncode == 0, once.stderr
+    twice = casecal("compensate", "cal.toml", "once.csv", "-o", "twice.csv", cwd=folder)
+    assert twice.returncode == 2 and twice.stderr.count("\n") == 1, twice.stderr
+    assert "compensated already" in twice.stderr and "applies the calibration twice" in twice.stderr
+    assert not (folder / "twice.csv").exists()

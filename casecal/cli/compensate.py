@@ -75,6 +75,11 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
+COMPENSATED_COLUMNS = ("ok", "position_error_mm", "orientation_error_mrad")
+"""The columns `run` writes beside the corrected joints: a targets file with them is
+compensated already."""
+
+
 def run(args: argparse.Namespace) -> None:
     """``casecal compensate``: write the corrected targets, one row per target."""
     from ..data.files import read_joints, read_table
@@ -90,6 +95,12 @@ def run(args: argparse.Namespace) -> None:
     if args.format is not None:
         raise CalibrationError("--format goes with --program")
     df, label = read_table(args.targets, "targets file")
+    if set(COMPENSATED_COLUMNS) <= set(df.columns):
+        raise CalibrationError(
+            f"{label} is compensate's output (columns {', '.join(COMPENSATED_COLUMNS)}): its "
+            "joints are compensated already, and compensating them again applies the "
+            "calibration twice; give the original targets"
+        )
     q = read_joints(df, calibrated, label)
     orientation = False if args.position_only else None
     result = compensate(calibrated, q, nominal, frame=args.frame, orientation=orientation)
