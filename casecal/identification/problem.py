@@ -109,6 +109,7 @@ class Problem:
             self.w_rows = np.hstack([self.w_rows, np.full((n, 3), self.w_rot)])
         self.w_flat = self.w_rows.ravel()
         self._uniform_of: tuple = (None, None)  # (w_rows, its one weight or None)
+        self._rows_of: tuple = (None, 0)  # (w_flat, its non-zero count)
         # keys: (kind, structure, data, p bytes[, kernel columns]); the data part names the
         # arrays (poses for evaluations, all of them and the weights for reductions), so
         # problems of other data never meet in a shared memo; a reweighted copy, its own
@@ -192,9 +193,11 @@ class Problem:
                 del self._memo[key]
 
     def _at(self, p: np.ndarray) -> bytes:
-        """What names `p` in memo keys: with `p0`, the rotations' anchor (the same `p`
-        from another start is another robot, `casecal.model.kinematics`)."""
-        return p.tobytes() + self.p0.tobytes()
+        """What names `p` in memo keys: with the rotations' anchor, `p0`'s pitches and
+        yaws (the same `p` from another start is another robot there,
+        `casecal.model.kinematics`; elsewhere it is the same robot, so a problem rebuilt
+        where a solver ended finds that point's evaluations)."""
+        return p.tobytes() + self.p0[self.chain.anchor_index].tobytes()
 
     def _evaluation_key(self, kind: str, p: np.ndarray) -> tuple:
         return (kind, self.robot.structure, self._poses, self._at(p))
@@ -239,7 +242,7 @@ class Problem:
         r = self.point_residuals(x).reshape(len(self.q), -1)
         if self.R is not None:
             r = np.hstack([r, self.orientation_residuals(x)])
-        return (r * self.w_rows).ravel()
+        return np.multiply(r, self.w_rows, out=r).ravel()  # r is new: no second array
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """Weighted ``∂f/∂x``, shape (N · rows per pose, k): whole, for small problems and
@@ -289,7 +292,9 @@ class Problem:
     def _observed(self, linear: Reduction) -> Reduction:
         """`linear` counting only rows of non-zero weight: a pose a robust loss left out is
         no observation (its rows would inflate the degrees of freedom)."""
-        rows = int(np.count_nonzero(self.w_flat))
+        if self._rows_of[0] is not self.w_flat:  # a pass over N rows: once per weights
+            self._rows_of = (self.w_flat, int(np.count_nonzero(self.w_flat)))
+        rows = self._rows_of[1]
         return linear if rows == linear.rows else dataclasses.replace(linear, rows=rows)
 
     def _from_wider(self, at: tuple) -> Reduction | None:

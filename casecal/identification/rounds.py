@@ -184,6 +184,7 @@ def fit_in_rounds(make, start: Robot, names, settings: Settings, e0: float) -> O
             if names[i] in base and names[i] not in order and names[i] not in pruned
         ]
         point, lost = _release(make, point, names, settings, weights, hold, order, base, r)
+        del r  # N rows: not kept alive through the next round's solve
         frozen.update(dict.fromkeys(lost, FROZEN))
         # what an uncertainty costs the robot: not a camera rig's own poses and lens
         J_work = workspace_jacobian(point, q_work, names, full) * moves_robot(point, names)
@@ -368,8 +369,10 @@ def _solve_round(make, point, names, estimated, settings: Settings, weights, hol
         problem = _problem(make, point, names, settings, weights).restricted(estimated)
         x = np.zeros(len(estimated))
         r = problem.residual(x)
-        if 0.5 * r @ r <= floor_cost(problem):  # nothing left to fit (a later round)
-            return point, iterations, 4, history or [0.5 * r @ r], None, weights
+        start_cost = 0.5 * float(r @ r)
+        del r  # the solver evaluates it again (memoised); N rows not kept through its run
+        if start_cost <= floor_cost(problem):  # nothing left to fit (a later round)
+            return point, iterations, 4, history or [start_cost], None, weights
         x, its, status, hist, message = solver(problem, x, **kwargs)
         if settings.method == "gauss-newton" and status in (0, 3) and settings.damped_after_stall:
             # stalled in a curved valley: Levenberg-Marquardt's damping goes on from here

@@ -59,8 +59,11 @@ class FitFrame:
         return None if R_meas is None else self.R.T @ R_meas
 
     def vectors_out(self, v: np.ndarray | None) -> np.ndarray | None:
-        """Fit-frame vectors (residuals, rotation vectors) (..., 3) in the instrument frame."""
-        return None if v is None else v @ self.R.T
+        """Fit-frame vectors (residuals, rotation vectors) (..., 3) in the instrument frame
+        (`v` itself in the identity frame: a million residuals are not copied)."""
+        if v is None or self.is_identity:
+            return v
+        return v @ self.R.T
 
     def base_out(self, base: Frame) -> Frame:
         """A fit-frame base frame expressed in the instrument frame."""
