@@ -4,26 +4,35 @@ A command may replace an output file that casecal itself wrote and nobody change
 (running ``identify -o cal.toml`` again), but never a file of the user's: a robot file
 typed by hand, another tool's CSV, a casecal file edited afterwards. The record is a
 register of ``SHA-256 <tab> real path`` lines, one per file written, in the cache folder
-(``$CASECAL_CACHE``, else ``~/.cache/casecal``, the kernels' folder). A file is casecal's
-when its path is registered with the digest of its present bytes. Lines are appended
-under a lock that readers share, and the register is trimmed in place to its newest
-lines past `REGISTER_BYTES`. Losing it (a cleared cache, another machine) loses no file:
-a command then refuses to replace what it wrote earlier and says how to allow it
-(``--overwrite``).
+(``$CASECAL_CACHE``, else ``~/.cache/casecal``, the kernels' folder), under a name no one
+else uses (`REGISTER`); casecal appends to it only while it is a regular file (not a
+link). A file is casecal's when its path is registered with the digest of its present
+bytes. Lines are appended under a lock that readers share, and the register is trimmed
+in place to its newest lines past `REGISTER_BYTES`. Losing it (a cleared cache, another
+machine) loses no file: a command then refuses to replace what it wrote earlier and says
+how to allow it (``--overwrite``).
+
+The command line checks its outputs before any work (`casecal.cli.outputs`) and, within
+`guarded`, `casecal.textio.write_together` checks each again just before it renames the
+new file into place (`check_replaceable`): a file that appeared, or was edited, while the
+command worked is not replaced either.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import logging
 import os
+import stat
 from pathlib import Path
 
 from ._cache import cache_dir
+from .errors import CalibrationError
 
 log = logging.getLogger(__name__)
 
-REGISTER = "written"
+REGISTER = "casecal-written-files.tsv"
 """The register's file name in the cache folder."""
 
 REGISTER_BYTES = 1 << 20
@@ -31,40 +40,78 @@ REGISTER_BYTES = 1 << 20
 
 REGISTER_KEEP = 4000
 
+_GUARD = [False]
+
+
+@contextlib.contextmanager
+def guarded(on: bool = True):
+    """Within this block, `check_replaceable` refuses files casecal did not write (a
+    command without ``--overwrite``); outside it (the library's own calls) it passes."""
+    before = _GUARD[0]
+    _GUARD[0] = bool(on)
+    try:
+        yield
+    finally:
+        _GUARD[0] = before
+
+
+def check_replaceable(path) -> None:
+    """Refuse, within `guarded`, to replace the regular file `path` if casecal did not
+    write it: it appeared, or was changed, after the command checked its outputs."""
+    if _GUARD[0] and os.path.isfile(path) and not wrote(path):
+        raise CalibrationError(
+            f"{str(path)!r} was made or changed by someone else while casecal worked; it is "
+            "kept and nothing was written (run again, give another name, or add --overwrite)"
+        )
+
 
 def _register() -> Path:
     return cache_dir() / REGISTER
 
 
-def _key(path) -> str:
-    return os.path.realpath(path)
+def _key(path) -> bytes | None:
+    """The register's name of `path`: its real path's bytes; None for a name the
+    register's lines cannot hold (a newline or tab in it: then never casecal's)."""
+    key = os.fsencode(os.path.realpath(path))
+    return None if b"\n" in key or b"\t" in key else key
+
+
+def _open(flags: int) -> int:
+    """The register, opened without following a link; OSError unless a regular file."""
+    fd = os.open(_register(), flags | getattr(os, "O_NOFOLLOW", 0), 0o644)
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise OSError(f"{_register()} is not a regular file")
+    return fd
 
 
 def remember(path, data: bytes) -> None:
-    """Register that casecal wrote `data` to `path` (a regular file, now in place).
+    """Register that casecal writes `data` to `path` (a regular file).
 
     Never raises: a register that cannot be written costs only a later refusal to
     replace this file without ``--overwrite``.
     """
     key = _key(path)
-    if "\n" in key or "\t" in key:
-        return  # a name the register's lines cannot hold: treated as not casecal's
-    line = f"{hashlib.sha256(data).hexdigest()}\t{key}\n".encode("utf-8", "surrogateescape")
-    register = _register()
+    if key is None:
+        return
+    line = hashlib.sha256(data).hexdigest().encode("ascii") + b"\t" + key + b"\n"
     try:
-        register.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(register, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o644)
+        _register().parent.mkdir(parents=True, exist_ok=True)
+        fd = _open(os.O_RDWR | os.O_APPEND | os.O_CREAT)
         try:
             _lock(fd, exclusive=True)
+            size = os.fstat(fd).st_size
+            if size and os.pread(fd, 1, size - 1) != b"\n":  # a line cut short by a kill
+                line = b"\n" + line
             os.write(fd, line)
-            if os.fstat(fd).st_size > REGISTER_BYTES:  # trimmed in place, under the lock
-                kept = _read(fd).splitlines(keepends=True)[-REGISTER_KEEP:]
+            if size + len(line) > REGISTER_BYTES:  # trimmed in place, under the lock
+                kept = _read(fd).split(b"\n")[:-1][-REGISTER_KEEP:]
                 os.ftruncate(fd, 0)
-                os.write(fd, b"".join(kept))
+                os.write(fd, b"".join(k + b"\n" for k in kept))
         finally:
             os.close(fd)  # releases the lock
     except OSError as exc:
-        log.debug("cannot record %s as written by casecal in %s: %s", key, register, exc)
+        log.debug("cannot record %s as written by casecal in %s: %s", path, _register(), exc)
 
 
 def _lock(fd: int, exclusive: bool) -> None:
@@ -89,9 +136,11 @@ def wrote(path) -> bool:
 
     The file is read only if the register names its path (a user's large file is not).
     """
-    key = _key(path).encode("utf-8", "surrogateescape")
+    key = _key(path)
+    if key is None:
+        return False
     try:
-        fd = os.open(_register(), os.O_RDONLY)
+        fd = _open(os.O_RDONLY)
         try:
             _lock(fd, exclusive=False)
             text = _read(fd)
@@ -99,11 +148,11 @@ def wrote(path) -> bool:
             os.close(fd)
     except OSError:
         return False
-    digests = {
-        line.partition(b"\t")[0].decode("ascii", "replace")
-        for line in text.splitlines()
-        if line.partition(b"\t")[2] == key
-    }
+    digests = set()
+    for line in text.split(b"\n"):  # not splitlines: a name may hold a carriage return
+        digest, _, name = line.partition(b"\t")
+        if name == key:
+            digests.add(digest.decode("ascii", "replace"))
     if not digests:
         return False
     digest = hashlib.sha256()

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ._signals import held_signals
 from .errors import CalibrationError
-from .ownership import remember
+from .ownership import check_replaceable, remember
 
 
 def read_text(path, what: str) -> str:
@@ -90,29 +90,36 @@ def write_together(files) -> None:
     """
     staged, renamed = [], []
     try:
-        targets = [(_target(path), text) for path, text in files]
-        for target, text in targets:
+        targets = [(check_target(path), _bytes(text)) for path, text in files]
+        for target, data in targets:
             if not isinstance(target, int) and not _special(target):
                 _sweep(target)
-                staged.append((_stage(target, text), target))
-        for target, text in targets:  # may wait for a FIFO's reader: Ctrl-C must work here
+                staged.append((_stage(target, data), target, data))
+        for target, data in targets:  # may wait for a FIFO's reader: Ctrl-C must work here
             if isinstance(target, int) or _special(target):
-                _write_through(target, text)
+                _write_through(target, data)
                 _done(renamed, target)
+        for _, target, data in staged:
+            check_replaceable(target)  # a file that appeared while casecal worked stays
+            remember(target, data)  # before the rename: a run beside this one sees it
         with held_signals():  # all renamed and recorded, or (killed) none: never a mix
-            for tmp, target in staged:
+            for tmp, target, _ in staged:
                 os.replace(tmp, target)
                 _done(renamed, target)
-        for target, text in targets:  # casecal's now: a later command may replace them
-            if not isinstance(target, int) and not _special(target):
-                remember(target, text if isinstance(text, bytes) else text.encode("utf-8"))
+    except BrokenPipeError:
+        raise  # a reader that stopped reading (`| head`): the command's business
     except OSError as exc:
         done = f"; written: {', '.join(renamed)}" if renamed else "; no file was changed"
         name = exc.filename if exc.filename else ""
         raise CalibrationError(f"cannot write {str(name)!r}: {exc.strerror or exc}{done}") from None
     finally:
-        for tmp, _ in staged:
+        for tmp, _, _ in staged:
             Path(tmp).unlink(missing_ok=True)
+
+
+def _bytes(text: str | bytes) -> bytes:
+    """What is written: bytes as they are, text as UTF-8 with its own line ends."""
+    return text if isinstance(text, bytes) else text.encode("utf-8")
 
 
 _RECORD: list[list[str]] = []
@@ -147,7 +154,8 @@ def _done(renamed: list[str], target) -> None:
 DESCRIPTORS = {1: "/dev/stdout", 2: "/dev/stderr"}
 
 _OPEN_DESCRIPTOR = re.compile(
-    r"/dev/(?P<std>stdout|stderr)|/dev/fd/(?P<fd>\d+)|/proc/(?P<pid>self|\d+)/fd/(?P<pfd>\d+)"
+    r"/dev/(?P<std>stdout|stderr)|/dev/fd/(?P<fd>\d+)"
+    r"|/proc/(?P<pid>self|thread-self|\d+)/fd/(?P<pfd>\d+)"
 )
 
 
@@ -157,27 +165,39 @@ def _descriptor(path: str) -> int | None:
     resolving the link would rename over the file the shell opened (``>> log``)."""
     if path == "-":  # as reading takes it for standard input
         return 1
-    match = _OPEN_DESCRIPTOR.fullmatch(os.path.normpath(path))
+    where = os.path.abspath(path)  # ../../dev/stdout too
+    where = "/" + where.lstrip("/") if where.startswith("//") else where  # POSIX keeps `//`
+    match = _OPEN_DESCRIPTOR.fullmatch(where)
     if not match:
         return None
     if match["std"]:
         return 1 if match["std"] == "stdout" else 2
     if match["fd"]:
         return int(match["fd"])
-    if match["pid"] != "self" and int(match["pid"]) != os.getpid():
+    if match["pid"] not in ("self", "thread-self") and int(match["pid"]) != os.getpid():
         return None  # another process's: an ordinary path
     return int(match["pfd"])
 
 
-def _target(path) -> Path | int:
-    if not str(path).strip():
+def check_target(path) -> Path | int:
+    """Where `write_together` writes `path`: an open descriptor, or the file (a link's
+    target). Refuses, in one `CalibrationError` line, what cannot be written as one file:
+    an empty name, a name ending in ``/`` (``x/`` is not ``x``), a folder, a link that
+    loops, a block device or socket, a read-only file."""
+    name = str(path)
+    if not name.strip():
         raise CalibrationError("the output file name is empty; give a file name")
-    fd = _descriptor(str(path))
+    fd = _descriptor(name)
     if fd is not None:
         return fd
+    if name.endswith(("/", os.sep)) or os.path.basename(name) in (".", ".."):
+        raise CalibrationError(f"{name!r} names a folder, not a file; give a file name")
     path = Path(path)
     if path.is_symlink():
-        path = path.resolve()  # write through the link, keep the link itself
+        try:
+            path = path.resolve()  # write through the link, keep the link itself
+        except (RuntimeError, OSError):  # Python 3.13 raises OSError (ELOOP)
+            raise CalibrationError(f"{name!r} is a link that leads back to itself") from None
     if path.is_dir():
         raise CalibrationError(f"{str(path)!r} is a folder; give a file name")
     if path.exists() and not path.is_file() and not _special(path):
@@ -191,10 +211,11 @@ def _target(path) -> Path | int:
     return path
 
 
-def written_into(path) -> bool:
-    """Whether `write_together` writes into `path` rather than replacing a file: ``-``,
-    an open descriptor (``/dev/stdout``), a FIFO or a character device (``/dev/null``)."""
-    return _descriptor(str(path)) is not None or _special(Path(path))
+def written_into(target: Path | int) -> bool:
+    """Whether `write_together` writes into `target` (of `check_target`) rather than
+    replacing a file: an open descriptor (``-``, ``/dev/stdout``), a FIFO or a character
+    device (``/dev/null``)."""
+    return isinstance(target, int) or _special(target)
 
 
 def _special(path: Path) -> bool:
@@ -206,37 +227,41 @@ def _special(path: Path) -> bool:
     return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
 
 
-def _write_through(target: Path | int, text: str | bytes) -> None:
+def _write_through(target: Path | int, data: bytes) -> None:
     try:
         if isinstance(target, int):  # the descriptor as the shell opened it (>> appends)
-            data = text if isinstance(text, bytes) else text.encode("utf-8")
             for stream in (sys.stdout, sys.stderr):  # what was printed before comes first
-                stream.flush()
+                if stream is not None:  # None: closed when Python started (`>&-`)
+                    stream.flush()
             while data:
                 data = data[os.write(target, data) :]
             return
-        binary = isinstance(text, bytes)
-        with open(target, "wb" if binary else "w", encoding=None if binary else "utf-8") as fh:
-            fh.write(text)  # a FIFO waits for its reader
+        with open(target, "wb") as fh:
+            fh.write(data)  # a FIFO waits for its reader
     except OSError as exc:
-        exc.filename = str(target) if not isinstance(target, int) else f"/dev/fd/{target}"
+        exc.filename = (
+            str(target)
+            if not isinstance(target, int)
+            else DESCRIPTORS.get(target, f"/dev/fd/{target}")
+        )
         raise
 
 
-def _stage(target: Path, text: str | bytes) -> str:
-    """`text` (UTF-8, or bytes as they are) in a temporary file beside `target`, with a new
-    file's mode; its path."""
+def _stage(target: Path, data: bytes) -> str:
+    """`data` in a temporary file beside `target` (its folder made if it is one new
+    folder), with a new file's mode; its path."""
     try:
+        if not target.parent.is_dir() and target.parent.parent.is_dir():
+            target.parent.mkdir(exist_ok=True)  # made as late as this: a refusal makes none
         fd, tmp = tempfile.mkstemp(
-            prefix=f".{target.name}.casecal-{os.getpid()}-", suffix=".tmp", dir=target.parent
+            prefix=f".{_stem(target)}.casecal-{os.getpid()}-", suffix=".tmp", dir=target.parent
         )
     except OSError as exc:  # a folder not writable: name the file the user gave
         exc.filename = str(target)
         raise
     try:
-        binary = isinstance(text, bytes)
-        with os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8") as fh:
-            fh.write(text)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
         os.chmod(tmp, _mode(target))
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
@@ -248,9 +273,18 @@ def _stage(target: Path, text: str | bytes) -> str:
     return tmp
 
 
+def _stem(target: Path) -> str:
+    """`target`'s name as its temporary files carry it: at most `STEM_BYTES` bytes, so
+    that a legal name of up to 255 bytes still has a legal temporary name."""
+    return os.fsdecode(os.fsencode(target.name)[:STEM_BYTES])
+
+
+STEM_BYTES = 200
+
+
 def _sweep(target: Path) -> None:
     """Remove temporary files of `target` left by casecal runs that were killed."""
-    pattern = re.compile(rf"\.{re.escape(target.name)}\.casecal-(\d+)-[A-Za-z0-9_]+\.tmp")
+    pattern = re.compile(rf"\.{re.escape(_stem(target))}\.casecal-(\d+)-[A-Za-z0-9_]+\.tmp")
     try:
         names = os.listdir(target.parent)
     except OSError:

@@ -7,6 +7,9 @@ casecal wrote and nobody changed is replaced as before. ``-`` is standard output
 
 from __future__ import annotations
 
+import os
+import signal
+
 import pytest
 
 import casecal.ownership as ownership
@@ -122,3 +125,134 @@ def test_the_register_keeps_its_newest_lines(tmp_path, monkeypatch, register):
     paths[-1].write_text("file 39 edited\n")
     assert not ownership.wrote(paths[-1])
     assert not ownership.wrote(tmp_path / "never.txt")
+
+
+@pytest.mark.parametrize("suffix", ["/", "/.", "//"])
+def test_a_name_ending_in_a_slash_is_not_the_file_before_it(folder, capsys, suffix):
+    (folder / "p.csv").write_bytes(USERS)
+    (folder / "link").symlink_to(folder / "p.csv")
+    for name in ("p.csv", "link", "m.csv"):  # a user's file, a link to it, an input
+        argv = ["identify", "rr", "m.csv", "--json", name + suffix]
+        assert main(argv) == 2
+        assert "names a folder, not a file" in capsys.readouterr().err
+    assert (folder / "p.csv").read_bytes() == USERS
+
+
+def test_a_file_made_while_the_command_works_is_kept(folder, capsys, monkeypatch):
+    import casecal.textio as textio
+
+    sweep = textio._sweep
+
+    def someone_writes(target):  # between the checks before the work and the rename
+        if target.name == "cal.toml":
+            target.write_bytes(USERS)
+        sweep(target)
+
+    monkeypatch.setattr(textio, "_sweep", someone_writes)
+    assert main(["identify", "rr", "m.csv", "-o", "cal.toml", "--deviations-out", "d.csv"]) == 2
+    assert "made or changed by someone else while casecal worked" in capsys.readouterr().err
+    assert (folder / "cal.toml").read_bytes() == USERS
+    assert not (folder / "d.csv").exists()  # the calibration's files: together or not at all
+    assert not [p for p in folder.iterdir() if ".casecal-" in p.name]
+
+
+def test_files_are_registered_before_they_are_renamed(folder, capsys, monkeypatch):
+    """Ctrl-C the moment a file is in place: it is casecal's, and the next run replaces it."""
+    import casecal.textio as textio
+
+    replace = textio.os.replace
+
+    def interrupted_after(tmp, target):
+        replace(tmp, target)
+        os.kill(os.getpid(), signal.SIGINT)  # held until the renames are done and recorded
+
+    monkeypatch.setattr(textio.os, "replace", interrupted_after)
+    assert main(["simulate", "rr", "--poses", "4", "-o", "s.csv"]) == 130
+    assert "interrupted; written: " in capsys.readouterr().err
+    monkeypatch.setattr(textio.os, "replace", replace)
+    assert main(["simulate", "rr", "--poses", "4", "-o", "s.csv"]) == 0
+
+
+def test_an_error_raised_by_a_ctrl_c_is_an_interrupt(folder, capsys, monkeypatch):
+    import casecal.cli.simulate as simulate
+
+    def importing(args):  # as matplotlib turns a Ctrl-C during its import into its own error
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise ValueError("matplotlib's own error") from None
+
+    monkeypatch.setattr(simulate, "run", importing)  # the parser is built at each main()
+    assert main(["simulate", "rr", "-o", "x.csv"]) == 130
+    assert capsys.readouterr().err == "casecal: interrupted; nothing was written\n"
+
+
+def test_the_register_survives_a_cut_line_a_link_and_odd_names(folder, register, tmp_path):
+    register.parent.mkdir(parents=True, exist_ok=True)
+    register.write_bytes(b"cut short by a kill")  # no newline at its end
+    odd = folder / "cr\rname.csv"
+    write_atomic(odd, "a\n")
+    assert ownership.wrote(odd)
+    assert register.read_bytes().startswith(b"cut short by a kill\n")
+    users = tmp_path / "users_notes.txt"
+    users.write_bytes(USERS)
+    register.unlink()
+    register.symlink_to(users)  # never followed: the user's file is not appended to
+    write_atomic(folder / "x.csv", "b\n")
+    assert users.read_bytes() == USERS and not ownership.wrote(folder / "x.csv")
+
+
+def test_other_spellings_of_standard_output_are_standard_output(folder, monkeypatch):
+    import casecal.textio as textio
+
+    monkeypatch.chdir("/dev")
+    for name in ("//dev/stdout", "/proc/thread-self/fd/1", "../dev/stdout", "stdout", "-"):
+        assert textio.check_target(name) == 1, name
+
+
+def test_a_long_legal_name_is_written(folder):
+    name = "a" * 250 + ".csv"  # 254 bytes: legal; its temporary name must be too
+    assert main(["simulate", "rr", "--poses", "3", "-q", "-o", name]) == 0
+    assert (folder / name).read_text().startswith("q1_deg")
+
+
+def test_a_refused_command_leaves_no_new_folder(folder, capsys):
+    (folder / "r.json").write_bytes(USERS)
+    assert main(["identify", "rr", "m.csv", "-o", "new/cal.toml", "--json", "r.json"]) == 2
+    assert not (folder / "new").exists()
+    assert main(["identify", "rr", "m.csv", "-o", "new/cal.toml"]) == 0
+    assert (folder / "new" / "cal.toml").is_file()
+
+
+def test_a_link_that_loops_is_refused_before_the_work(folder, capsys):
+    (folder / "loop").symlink_to(folder / "loop")
+    assert main(["identify", "rr", "m.csv", "--json", "loop"]) == 2
+    err = capsys.readouterr().err
+    assert "leads back to itself" in err and "parameter" not in capsys.readouterr().out
+
+
+def test_writers_of_one_file_at_once_do_not_refuse_each_other(tmp_path):
+    import subprocess
+    import sys
+
+    argv = [sys.executable, "-m", "casecal", "-q", "simulate", "rr", "-o", "same.csv"]
+    runs = [
+        subprocess.Popen(
+            [*argv, "--poses", str(5 + i)], cwd=tmp_path, stderr=subprocess.PIPE, text=True
+        )
+        for i in range(6)
+    ]
+    errors = [run.communicate(timeout=300)[1] for run in runs]
+    assert [run.returncode for run in runs] == [0] * 6, errors
+
+
+def test_standard_output_closed_is_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-m", "casecal", "simulate", "rr", "--poses", "3", "-o", "-"],
+        cwd=tmp_path, stderr=subprocess.PIPE, text=True, preexec_fn=lambda: os.close(1),
+    )  # fmt: skip
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert "cannot write '/dev/stdout'" in done.stderr

@@ -14,6 +14,7 @@ import warnings
 from .. import __version__
 from .._signals import sigterm_unwinds
 from ..errors import CalibrationError, Terminated
+from ..ownership import guarded
 from ..textio import recording
 from . import (
     calibrate_until,
@@ -80,7 +81,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=level, format="casecal: %(levelname)s: %(message)s")
     logging.getLogger("casecal").setLevel(level)  # each call's own, in one process too
     warnings.showwarning = one_line_warning
-    with recording() as written, sigterm_unwinds():  # written: as each file is in place
+    guard = guarded(not getattr(args, "overwrite", False))  # its own files, or --overwrite
+    with recording() as written, sigterm_unwinds(), guard:  # written: as each is in place
         try:
             check_outputs(args)
             args.func(args)
@@ -88,14 +90,36 @@ def main(argv: list[str] | None = None) -> int:
             print(f"casecal: error: {exc}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as exc:
-            done = f"written: {', '.join(written)}" if written else "nothing was written"
-            how = "terminated" if isinstance(exc, Terminated) else "interrupted"
-            print(f"casecal: {how}; {done}", file=sys.stderr)
-            return 143 if isinstance(exc, Terminated) else 130
+            return _interrupted(exc, written)
         except BrokenPipeError:  # e.g. `casecal robots | head`
             return 0
         except OSError as exc:  # the system refused a read or write the library did not foresee
-            where = f" {exc.filename!r}" if exc.filename else ""
+            where = f" {exc.filename!r}:" if exc.filename else ""
             print(f"casecal: error:{where} {exc.strerror or exc}", file=sys.stderr)
             return 2
+        except Exception as exc:
+            interrupt = _interrupt_behind(exc)
+            if interrupt is None:
+                raise  # a bug: its traceback, exit 1
+            return _interrupted(interrupt, written)
     return 0
+
+
+def _interrupted(exc: KeyboardInterrupt, written: list[str]) -> int:
+    """Say that the command was interrupted and what was written; the exit code."""
+    done = f"written: {', '.join(written)}" if written else "nothing was written"
+    how = "terminated" if isinstance(exc, Terminated) else "interrupted"
+    print(f"casecal: {how}; {done}", file=sys.stderr)
+    return 143 if isinstance(exc, Terminated) else 130
+
+
+def _interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C (or SIGTERM) another exception was raised while handling, if any: a
+    library importing when the signal came (matplotlib) may turn it into its own error."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None

@@ -12,11 +12,13 @@ import os
 from pathlib import Path
 
 from ..errors import CalibrationError
-from ..textio import written_into
+from ..textio import check_target, written_into
 
 
-def check_writable_dir(path) -> None:
-    """Make the output folder `path` if it is one new folder; refuse one that cannot be."""
+def check_output_folder(path) -> None:
+    """Refuse an output folder `path` that cannot be had: a file, one whose parent does
+    not exist either (one new folder is made when the file is written, none here), one
+    not writable."""
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise CalibrationError(f"{str(p)!r} is a file, not a folder; choose another output")
@@ -26,12 +28,9 @@ def check_writable_dir(path) -> None:
             f"cannot create output folder {str(p)!r}: {str(p.absolute().parent)!r} does not "
             "exist either (check the path, or create the folders first)"
         )
-    try:
-        p.mkdir(exist_ok=True)
-    except OSError as exc:
-        raise CalibrationError(f"cannot create output folder {str(p)!r}: {exc.strerror}") from None
-    if not os.access(p, os.W_OK):
-        raise CalibrationError(f"output folder {str(p)!r} is not writable; choose another with -o")
+    where = p if p.exists() else p.absolute().parent
+    if not os.access(where, os.W_OK):
+        raise CalibrationError(f"output folder {str(where)!r} is not writable; choose another")
 
 
 OUTPUTS = {
@@ -51,8 +50,10 @@ def check_outputs(args: argparse.Namespace) -> None:
     replaced: an empty name, one in a folder that cannot be made, one of the command's
     input files (the user's measurements or targets), another output's file (one would
     silently replace the other), or an existing file casecal did not write (unless
-    ``--overwrite``; `casecal.ownership`). ``-``, ``/dev/stdout``, a FIFO or another
-    character device is written into and needs none of these."""
+    ``--overwrite``; `casecal.ownership`), and what `casecal.textio.check_target`
+    refuses (a folder, a name ending in ``/``, a link that loops, a read-only file).
+    ``-``, ``/dev/stdout``, a FIFO or another character device is written into and needs
+    none of the rest."""
     outputs = [(flag, getattr(args, dest, None)) for dest, flag in OUTPUTS.items()]
     outputs = [(flag, str(path)) for flag, path in outputs if path is not None]
     if getattr(args, "command", None) == "report":
@@ -61,9 +62,9 @@ def check_outputs(args: argparse.Namespace) -> None:
     for flag, path in outputs:
         if not path.strip():
             raise CalibrationError(f"the {flag} file name is empty; give a file name")
-        if written_into(path):
+        if written_into(check_target(path)):  # refuses a folder, a loop, read-only …
             continue
-        check_writable_dir(os.path.dirname(os.path.abspath(path)))
+        check_output_folder(os.path.dirname(os.path.abspath(path)))
         key = os.path.realpath(path)
         if key in seen:
             raise CalibrationError(

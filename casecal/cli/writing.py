@@ -168,6 +168,9 @@ def robot_file_text(args: argparse.Namespace, robot) -> str:
         origin = path_text(
             os.path.relpath(Path(origin).resolve(), Path(args.output).resolve().parent)
         )
+    # a file name that is not UTF-8 (bytes the file system holds as they are) cannot go
+    # into a UTF-8 file: its undecodable bytes become U+FFFD, and the link says it is lost
+    origin = os.fsencode(origin).decode("utf-8", "replace")
     out = export(dataclasses.replace(robot, calibrated_from=origin, auto_beta=False), args.output)
     say_notes(args.output, out)
     return out.text
