@@ -256,3 +256,13 @@ def test_standard_output_closed_is_one_line(tmp_path):
     )  # fmt: skip
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
     assert "cannot write '/dev/stdout'" in done.stderr
+
+
+def test_an_output_named_like_a_catalog_robot_is_no_input(folder, capsys):
+    assert main(["simulate", "rr", "--poses", "4", "-q", "-o", "rr"]) == 0
+    assert main(["simulate", "rr", "--poses", "5", "-q", "-o", "rr"]) == 0  # rr: the catalog's
+    assert len((folder / "rr").read_text().splitlines()) == 6
+    assert main(["convert", "rr", "rr.toml"]) == 0
+    capsys.readouterr()
+    assert main(["simulate", "./rr.toml", "--poses", "5", "-o", "rr.toml"]) == 2  # a file
+    assert "is also the file read as robot" in capsys.readouterr().err

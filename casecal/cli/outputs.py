@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 from ..errors import CalibrationError
+from ..model.names import is_path
 from ..textio import check_target, written_into
 
 
@@ -75,6 +76,8 @@ def check_outputs(args: argparse.Namespace) -> None:
         for dest, value in vars(args).items():
             if dest in OUTPUTS or dest == "func" or not isinstance(value, str):
                 continue
+            if dest in ROBOTS and not is_path(value):
+                continue  # a catalog name, read from the catalog whatever file has its name
             if value != "-" and _same_file(path, value):
                 raise CalibrationError(
                     f"{flag} {path!r} is also the file read as {dest.replace('_', ' ')}: "
@@ -83,6 +86,9 @@ def check_outputs(args: argparse.Namespace) -> None:
         if not getattr(args, "overwrite", False):
             _check_ours(flag, path)
 
+
+ROBOTS = ("robot", "nominal")
+"""Options that name a robot: a catalog robot unless `casecal.model.names.is_path`."""
 
 OVERWRITE_HELP = (
     "replace output files that exist although casecal did not write them (without it, "
