@@ -22,15 +22,13 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import logging
 import os
 import stat
+import warnings
 from pathlib import Path
 
 from ._cache import cache_dir
 from .errors import CalibrationError
-
-log = logging.getLogger(__name__)
 
 REGISTER = "casecal-written-files.tsv"
 """The register's file name in the cache folder."""
@@ -61,7 +59,8 @@ def check_replaceable(path) -> None:
     if _GUARD[0] and os.path.isfile(path) and not wrote(path):
         raise CalibrationError(
             f"{str(path)!r} was made or changed by someone else while casecal worked; it is "
-            "kept and nothing was written (run again, give another name, or add --overwrite)"
+            "kept, and the files written with it are not (run again, give another name, or "
+            "add --overwrite)"
         )
 
 
@@ -94,24 +93,48 @@ def remember(path, data: bytes) -> None:
     key = _key(path)
     if key is None:
         return
-    line = hashlib.sha256(data).hexdigest().encode("ascii") + b"\t" + key + b"\n"
+    line = hashlib.sha256(data).hexdigest().encode("ascii") + b"\t" + key
     try:
         _register().parent.mkdir(parents=True, exist_ok=True)
         fd = _open(os.O_RDWR | os.O_APPEND | os.O_CREAT)
         try:
             _lock(fd, exclusive=True)
-            size = os.fstat(fd).st_size
-            if size and os.pread(fd, 1, size - 1) != b"\n":  # a line cut short by a kill
-                line = b"\n" + line
-            os.write(fd, line)
-            if size + len(line) > REGISTER_BYTES:  # trimmed in place, under the lock
-                kept = _read(fd).split(b"\n")[:-1][-REGISTER_KEEP:]
-                os.ftruncate(fd, 0)
+            lines = _read(fd).split(b"\n")  # the last: b"" or a line cut short by a kill
+            if line in lines:
+                return  # the same bytes again: one line is enough
+            if sum(map(len, lines)) + len(lines) + len(line) > REGISTER_BYTES:
+                kept = _newest_per_path([*lines, line])[-REGISTER_KEEP:]
+                os.ftruncate(fd, 0)  # trimmed in place, under the lock
                 os.write(fd, b"".join(k + b"\n" for k in kept))
+            else:
+                os.write(fd, (b"\n" if lines[-1] else b"") + line + b"\n")
         finally:
             os.close(fd)  # releases the lock
     except OSError as exc:
-        log.debug("cannot record %s as written by casecal in %s: %s", path, _register(), exc)
+        _warn_once(f"cannot record {str(path)!r} as written by casecal in {_register()} "
+                   f"({exc.strerror or exc}): a later command will not replace it without "
+                   "--overwrite; set CASECAL_CACHE to a writable folder")  # fmt: skip
+
+
+def _newest_per_path(lines: list[bytes]) -> list[bytes]:
+    """`lines` (oldest first) with only the newest line of each path, order kept: the
+    file at a path holds its newest bytes, so older digests of it are moot."""
+    seen, kept = set(), []
+    for line in reversed(lines):
+        _, tab, name = line.partition(b"\t")
+        if tab and name not in seen:
+            seen.add(name)
+            kept.append(line)
+    return kept[::-1]
+
+
+_WARNED = [False]
+
+
+def _warn_once(text: str) -> None:
+    if not _WARNED[0]:
+        _WARNED[0] = True
+        warnings.warn(text, stacklevel=3)
 
 
 def _lock(fd: int, exclusive: bool) -> None:
@@ -135,25 +158,12 @@ def wrote(path) -> bool:
     """Whether the regular file `path` holds exactly bytes casecal wrote to it.
 
     The file is read only if the register names its path (a user's large file is not).
+    The register is read again after the file: a command registers its bytes before it
+    renames them into place, so whatever the file held when read is in that reading
+    (another command may have replaced it meanwhile).
     """
     key = _key(path)
-    if key is None:
-        return False
-    try:
-        fd = _open(os.O_RDONLY)
-        try:
-            _lock(fd, exclusive=False)
-            text = _read(fd)
-        finally:
-            os.close(fd)
-    except OSError:
-        return False
-    digests = set()
-    for line in text.split(b"\n"):  # not splitlines: a name may hold a carriage return
-        digest, _, name = line.partition(b"\t")
-        if name == key:
-            digests.add(digest.decode("ascii", "replace"))
-    if not digests:
+    if key is None or not _digests(key):
         return False
     digest = hashlib.sha256()
     try:
@@ -162,4 +172,23 @@ def wrote(path) -> bool:
                 digest.update(block)
     except OSError:
         return False
-    return digest.hexdigest() in digests
+    return digest.hexdigest() in _digests(key)
+
+
+def _digests(key: bytes) -> set[str]:
+    """The digests the register holds for the path `key`."""
+    try:
+        fd = _open(os.O_RDONLY)
+        try:
+            _lock(fd, exclusive=False)
+            text = _read(fd)
+        finally:
+            os.close(fd)
+    except OSError:
+        return set()
+    digests = set()
+    for line in text.split(b"\n"):  # not splitlines: a name may hold a carriage return
+        digest, _, name = line.partition(b"\t")
+        if name == key:
+            digests.add(digest.decode("ascii", "replace"))
+    return digests

@@ -8,6 +8,7 @@ writes through symbolic links. Every failure is one `CalibrationError` line.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import stat
@@ -95,12 +96,13 @@ def write_together(files) -> None:
             if not isinstance(target, int) and not _special(target):
                 _sweep(target)
                 staged.append((_stage(target, data), target, data))
+        for _, target, _ in staged:
+            check_replaceable(target)  # a file that appeared while casecal worked stays
         for target, data in targets:  # may wait for a FIFO's reader: Ctrl-C must work here
             if isinstance(target, int) or _special(target):
                 _write_through(target, data)
                 _done(renamed, target)
         for _, target, data in staged:
-            check_replaceable(target)  # a file that appeared while casecal worked stays
             remember(target, data)  # before the rename: a run beside this one sees it
         with held_signals():  # all renamed and recorded, or (killed) none: never a mix
             for tmp, target, _ in staged:
@@ -233,8 +235,11 @@ def _write_through(target: Path | int, data: bytes) -> None:
             for stream in (sys.stdout, sys.stderr):  # what was printed before comes first
                 if stream is not None:  # None: closed when Python started (`>&-`)
                     stream.flush()
-            while data:
-                data = data[os.write(target, data) :]
+            try:
+                while data:
+                    data = data[os.write(target, data) :]
+            except OverflowError:  # /dev/fd/99999999999: no such descriptor
+                raise OSError(errno.EBADF, os.strerror(errno.EBADF)) from None
             return
         with open(target, "wb") as fh:
             fh.write(data)  # a FIFO waits for its reader

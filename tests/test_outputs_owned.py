@@ -240,10 +240,10 @@ def test_writers_of_one_file_at_once_do_not_refuse_each_other(tmp_path):
         subprocess.Popen(
             [*argv, "--poses", str(5 + i)], cwd=tmp_path, stderr=subprocess.PIPE, text=True
         )
-        for i in range(6)
+        for i in range(10)
     ]
     errors = [run.communicate(timeout=300)[1] for run in runs]
-    assert [run.returncode for run in runs] == [0] * 6, errors
+    assert [run.returncode for run in runs] == [0] * 10, errors
 
 
 def test_standard_output_closed_is_one_line(tmp_path):
@@ -266,3 +266,45 @@ def test_an_output_named_like_a_catalog_robot_is_no_input(folder, capsys):
     capsys.readouterr()
     assert main(["simulate", "./rr.toml", "--poses", "5", "-o", "rr.toml"]) == 2  # a file
     assert "is also the file read as robot" in capsys.readouterr().err
+
+
+def test_a_register_that_cannot_be_written_is_said_at_once(folder, capsys, monkeypatch):
+    (folder / "blocked").write_text("a file where the register's folder would be")
+    monkeypatch.setattr(ownership, "_register", lambda: folder / "blocked" / "written")
+    monkeypatch.setattr(ownership, "_WARNED", [False])
+    assert main(["simulate", "rr", "--poses", "4", "-o", "new.csv"]) == 0
+    err = capsys.readouterr().err
+    assert "casecal: warning: cannot record 'new.csv' as written by casecal" in err
+    assert "without --overwrite" in err and "CASECAL_CACHE" in err
+
+
+def test_a_refusal_at_the_rename_names_what_was_already_written(folder, capsys, monkeypatch):
+    import casecal.textio as textio
+
+    sweep = textio._sweep
+
+    def someone_writes(target):
+        if target.name == "cal.toml":
+            target.write_bytes(USERS)
+        sweep(target)
+
+    monkeypatch.setattr(textio, "_sweep", someone_writes)
+    assert main(["identify", "rr", "m.csv", "-o", "cal.toml", "--json", "r.json"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.rstrip().endswith("; already written: r.json"), err
+    assert (folder / "cal.toml").read_bytes() == USERS
+
+
+def test_rewriting_one_file_does_not_push_others_out_of_the_register(tmp_path, monkeypatch):
+    monkeypatch.setattr(ownership, "REGISTER_BYTES", 2000)
+    monkeypatch.setattr(ownership, "REGISTER_KEEP", 5)
+    write_atomic(tmp_path / "kept.txt", "mine to replace later\n")
+    for i in range(100):
+        write_atomic(tmp_path / "busy.txt", f"version {i}\n")
+    assert ownership.wrote(tmp_path / "kept.txt") and ownership.wrote(tmp_path / "busy.txt")
+
+
+def test_a_descriptor_number_too_large_is_one_line(folder, capsys):
+    assert main(["simulate", "rr", "--poses", "3", "-o", "/dev/fd/99999999999999999999"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Bad file descriptor" in err, err

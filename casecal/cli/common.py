@@ -33,13 +33,26 @@ class Output:
 def say(*values, **kwargs) -> None:
     """`print` to standard output, unless -q: a summary or note, not a requested output."""
     if not Output.quiet:
-        print(*values, **kwargs)
+        _print(*values, **kwargs)
 
 
 def note(text: str) -> None:
     """A note line on standard error (``casecal: note: ...``), unless -q."""
     if not Output.quiet:
-        print(text, file=sys.stderr)
+        _print(text, file=sys.stderr)
+
+
+def _print(*values, file=None, **kwargs) -> None:
+    """`print`, with what the stream's encoding cannot show (a file name's undecodable
+    bytes) as backslash escapes instead of a UnicodeEncodeError after the work is done."""
+    stream = sys.stdout if file is None else file
+    try:
+        print(*values, file=stream, **kwargs)
+    except UnicodeEncodeError:
+        encoding = getattr(stream, "encoding", None) or "utf-8"
+        text = kwargs.get("sep", " ").join(map(str, values))
+        print(text.encode(encoding, "backslashreplace").decode(encoding), file=stream,
+              end=kwargs.get("end", "\n"), flush=kwargs.get("flush", False))  # fmt: skip
 
 
 def add_output_switches(p: argparse.ArgumentParser, default) -> None:

@@ -87,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
             check_outputs(args)
             args.func(args)
         except CalibrationError as exc:
-            print(f"casecal: error: {exc}", file=sys.stderr)
+            done = f"; already written: {', '.join(written)}" if written else ""
+            print(f"casecal: error: {exc}{done}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as exc:
             return _interrupted(exc, written)
