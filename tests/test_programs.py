@@ -317,6 +317,33 @@ def test_urscript_compensated_only_its_joint_values():
     check_reached(out_q, in_q, nominal, real, result, 6 + np.log10(180 / np.pi))
 
 
+URSCRIPT_KEYWORDS = """def moves():
+  movej(q=[0.1, -1.2, 1.3, -1.7, -1.5, 0.2], a=1.2, v=0.25)
+  movej(a=1.4, v=1.05, q=[0.2, -1.1, 1.2, -1.6, -1.4, 0.1])
+  movej(d2r([10, -60, 70, -30, -90, 5]), a=1.2)
+  movec(pose_via=[0.3, -1.0, 1.1, -1.5, -1.5, 0.0], pose_to=p[0.4, 0, 0.3, 0, 3.14, 0], a=1)
+end
+"""
+
+
+def test_urscript_positions_given_by_keyword_or_as_a_list_in_degrees():
+    nominal, real = ur()
+    expected = {
+        2: [0.1, -1.2, 1.3, -1.7, -1.5, 0.2],
+        3: [0.2, -1.1, 1.2, -1.6, -1.4, 0.1],
+        4: list(np.deg2rad([10, -60, 70, -30, -90, 5])),
+        5: [0.3, -1.0, 1.1, -1.5, -1.5, 0.0],
+    }
+    check_targets(urscript, URSCRIPT_KEYWORDS, nominal, expected, 1.0)
+    result = compensate_program(real, URSCRIPT_KEYWORDS, "urscript", nominal=nominal)
+    assert result.changed == (2, 3, 4, 5)
+    assert result.skipped == ((5, "pose target p[...] (Cartesian): left as is"),)
+    assert "movej(d2r([10.0" in result.text or "movej(d2r([9.9" in result.text  # degrees
+    out_q = np.array([t.q for t in urscript.find(result.text, nominal).targets])
+    check_reached(out_q, np.array(list(expected.values())), nominal, real, result,
+                  6 + np.log10(180 / np.pi))  # fmt: skip
+
+
 def test_csv_compensated_and_read_back_by_casecals_reader(tmp_path):
     nominal, real = kuka()
     result = compensate_program(real, CSV, "csv", nominal=nominal, header=HEADER)

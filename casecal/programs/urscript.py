@@ -27,6 +27,16 @@ _ASSIGN = re.compile(
     r"^[ \t]*(?:(?:global|local)[ \t]+)?([A-Za-z_]\w*)[ \t]*=(?!=)[ \t]*", re.MULTILINE
 )
 _D2R = re.compile(rf"d2r\(\s*({NUMBER.pattern})\s*\)")
+_D2R_LIST = re.compile(r"d2r\(\s*\[")
+_KEYWORD = re.compile(r"([A-Za-z_]\w*)\s*=(?!=)\s*")
+_POSITIONS = {
+    "movej": ("q",),
+    "servoj": ("q",),
+    "movel": ("pose",),
+    "movep": ("pose",),
+    "movec": ("pose_via", "pose_to"),
+}
+"""Each move's position parameters, by the names its keyword arguments give them."""
 
 
 def find(text: str, robot) -> Found:
@@ -49,8 +59,14 @@ def find(text: str, robot) -> Found:
         close = closing(masked, m.end() - 1, "()")
         if close < 0:
             raise CalibrationError(f"line {line_of(m.start())}: {m.group(1)}( is not closed")
-        args = split_top(masked, m.end(), close)
-        for a, b in args[: 2 if m.group(1) == "movec" else 1]:
+        positions = []  # positional first, then given by keyword (movej(q=[...]))
+        for a, b in split_top(masked, m.end(), close):
+            key = _KEYWORD.match(masked, a, b)
+            if key is None:
+                positions.append((a, b))
+            elif key.group(1) in _POSITIONS[m.group(1)]:
+                positions.append((key.end(), b))
+        for a, b in positions[: len(_POSITIONS[m.group(1)])]:
             _position(text, masked, a, b, robot, line_of, found, names)
     assigned = set()
     for m in _ASSIGN.finditer(masked):
@@ -87,6 +103,12 @@ def _position(text, masked, a, b, robot, line_of, found: Found, names) -> None:
         _list(text, masked, a, b, robot, line, found)
     elif arg.startswith("p["):
         found.skipped.append((line, "pose target p[...] (Cartesian): left as is"))
+    elif _D2R_LIST.match(arg):  # d2r([...]): the whole list in degrees
+        start = a + arg.index("[")
+        close = closing(masked, start, "[]")
+        if close < 0 or masked[close + 1 : b].strip() != ")":
+            raise CalibrationError(f"line {line}: d2r([...]) is not a closed joint list")
+        _list(text, masked, start, close + 1, robot, line, found, degrees=True)
     elif names is not None and re.fullmatch(r"[A-Za-z_]\w*", arg):
         names.setdefault(arg, line)
     else:
@@ -95,7 +117,8 @@ def _position(text, masked, a, b, robot, line_of, found: Found, names) -> None:
         found.skipped.append((line, f"position computed at run time ({what}): left as is"))
 
 
-def _list(text, masked, a, b, robot, line, found: Found) -> None:
+def _list(text, masked, a, b, robot, line, found: Found, degrees: bool = False) -> None:
+    """The joint list masked[a:b] (``[...]``) as a target; `degrees`: inside d2r(...)."""
     items = split_top(masked, a + 1, b - 1)
     if len(items) != robot.dof:
         raise CalibrationError(
@@ -103,9 +126,11 @@ def _list(text, masked, a, b, robot, line, found: Found) -> None:
         )
     spans, q, units = [], [], []
     for i, ((s, e), joint) in enumerate(zip(items, robot.controller_joints, strict=True), start=1):
-        d2r = _D2R.fullmatch(masked[s:e])
+        d2r = None if degrees else _D2R.fullmatch(masked[s:e])
         if d2r:
             s, e = s + d2r.start(1), s + d2r.end(1)
+            unit = "deg"
+        elif degrees:
             unit = "deg"
         else:
             unit = "rad" if joint.type == "R" else "m"
