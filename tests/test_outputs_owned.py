@@ -308,3 +308,12 @@ def test_a_descriptor_number_too_large_is_one_line(folder, capsys):
     assert main(["simulate", "rr", "--poses", "3", "-o", "/dev/fd/99999999999999999999"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Bad file descriptor" in err, err
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_overwrite_before_or_after_the_command(folder, where):
+    (folder / "u.csv").write_bytes(USERS)
+    argv = ["simulate", "rr", "--poses", "3", "-q", "-o", "u.csv"]
+    argv = ["--overwrite", *argv] if where == "before" else [*argv, "--overwrite"]
+    assert main(argv) == 0
+    assert (folder / "u.csv").read_text().startswith("q1_deg")

@@ -53,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"casecal {__version__}")
     add_output_switches(parser, 0)
+    parser.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for module in (*COMMANDS, report):
@@ -61,7 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
         # every command that writes files may be told to replace one casecal did not write
         # (the report's folder keeps the user's files whatever it is told)
         if name != "report" and any(a.dest in OUTPUTS for a in command._actions):
-            command.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+            command.add_argument(  # SUPPRESS: `casecal --overwrite CMD` stands without one here
+                "--overwrite", action="store_true", default=argparse.SUPPRESS, help=OVERWRITE_HELP
+            )
     return parser
 
 
