@@ -262,3 +262,24 @@ def test_the_console_script_runs_convert(tmp_path):
     done = casecal("convert", "rr", out, script=True)
     assert done.returncode == 0 and out.is_file(), done.stderr
     assert os.path.getsize(out) > 0
+
+
+def test_convert_keeps_the_link_to_the_nominal_robot_from_the_new_folder(tmp_path):
+    """A calibrated robot converted into another folder still names its own nominal robot
+    (calibrated_from, relative to the file), not the path copied as it was, which would be
+    read from the new folder (here a decoy: another robot at b/a/nominal.toml)."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    (b / "a").mkdir(parents=True)
+    a.mkdir()
+    assert casecal("convert", "rr", a / "nominal.toml").returncode == 0
+    assert casecal("convert", "puma560", b / "a" / "nominal.toml").returncode == 0
+    text = (a / "nominal.toml").read_text()
+    (a / "cal.toml").write_text('calibrated_from = "nominal.toml"\n' + text)
+    done = subprocess.run(  # relative paths, as typed: loading makes the link "a/nominal.toml"
+        [sys.executable, "-m", "casecal", "convert", "a/cal.toml", "b/cal.toml"],
+        cwd=tmp_path, capture_output=True, text=True,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert 'calibrated_from = "../a/nominal.toml"' in (b / "cal.toml").read_text()
+    link = cc.load_robot(str(b / "cal.toml")).calibrated_from
+    assert Path(link).resolve() == (a / "nominal.toml").resolve()

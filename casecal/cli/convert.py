@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 
 from ..errors import CalibrationError
 from ..textio import write_atomic
 from .common import add_robot_options, command, robot_for, say
-from .writing import how_to_load, say_notes
+from .writing import how_to_load, nominal_seen_from, say_notes
 
 
 def add_parser(sub) -> None:
@@ -22,8 +23,9 @@ def add_parser(sub) -> None:
         "compared with the robot's at 300 poses before it replaces anything, as every "
         "export is; a conversion that cannot be exact (a joint coupling or error terms to "
         "URDF, a tree to a UR file, a tool a UR file cannot place) is refused, nothing "
-        "written. OUT may not be the robot file read; another existing OUT is replaced, "
-        "as by identify -o.",
+        "written. OUT may not be the robot file read; an existing OUT is replaced only if "
+        "casecal wrote it (or with --overwrite). A calibrated robot's link to its nominal "
+        "robot (calibrated_from) is kept, relative to OUT's folder.",
     )
     p.add_argument("robot", metavar="IN", help="catalog name, .toml, .urdf, .xacro or .yaml path")
     p.add_argument(
@@ -40,6 +42,10 @@ def run(args: argparse.Namespace) -> None:
     if not args.out.strip():
         raise CalibrationError("the output file name is empty; give a file name as OUT")
     robot = robot_for(args, args.robot)
+    if robot.calibrated_from:  # loading made it a path from here: from OUT's folder now
+        robot = dataclasses.replace(
+            robot, calibrated_from=nominal_seen_from(robot.calibrated_from, args.out)
+        )
     out = export(robot, args.out)  # read back and compared before anything is written
     if out.statement:
         raise CalibrationError(

@@ -157,20 +157,25 @@ def check_robot_format(args: argparse.Namespace, robot) -> None:
         robot_text(robot, args.output)
 
 
+def nominal_seen_from(origin: str, output) -> str:
+    """The ``calibrated_from`` of a robot file written to `output` whose nominal robot is
+    `origin` (a catalog name, or a path from the current folder): a path is made relative
+    to `output`'s folder, as loading reads it (``./arm``, never ``arm``, a catalog name).
+
+    A file name that is not UTF-8 (bytes the file system holds as they are) cannot go into
+    a UTF-8 file: its undecodable bytes become U+FFFD, and the link says it is lost.
+    """
+    if origin and origin != "-" and is_path(origin):  # a missing file too: kept pointing at it
+        origin = path_text(os.path.relpath(Path(origin).resolve(), Path(output).resolve().parent))
+    return os.fsencode(origin).decode("utf-8", "replace")
+
+
 def robot_file_text(args: argparse.Namespace, robot) -> str:
     """The -o file's text in the format its extension names (.toml, .urdf); what that
     format cannot hold is said on standard error."""
     from ..model.save import export
 
-    origin = args.robot
-    if is_path(origin) and Path(origin).is_file():  # relative to the output's folder, as
-        # loading reads it; './arm', never 'arm' (a catalog name)
-        origin = path_text(
-            os.path.relpath(Path(origin).resolve(), Path(args.output).resolve().parent)
-        )
-    # a file name that is not UTF-8 (bytes the file system holds as they are) cannot go
-    # into a UTF-8 file: its undecodable bytes become U+FFFD, and the link says it is lost
-    origin = os.fsencode(origin).decode("utf-8", "replace")
+    origin = nominal_seen_from(args.robot, args.output)
     out = export(dataclasses.replace(robot, calibrated_from=origin, auto_beta=False), args.output)
     say_notes(args.output, out)
     return out.text
