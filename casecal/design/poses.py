@@ -153,7 +153,8 @@ def optimal(
     J = J / scale  # (C, 3, k) scaled
     k, rows = len(base), J.shape[1]  # rows: 3 per pose, per tip of a tree
     if rows * (n + (0 if include is None else len(include))) < k:
-        raise CalibrationError(f"{n} poses give {rows * n} coordinates for {k} parameters")
+        give = "poses give" if n != 1 else "pose gives"
+        raise CalibrationError(f"{n} {give} {rows * n} coordinates for {k} parameters")
     M0 = None
     if include is not None and len(include):
         Ji, _ = robot.position_jacobian(np.asarray(include, float), names, deviations=True)

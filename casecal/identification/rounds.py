@@ -317,8 +317,9 @@ def check_analysis(full: Problem) -> Observability:
     n_poses, rows = full.q.shape[0], int(np.count_nonzero(full.w_flat))
     if obs.rank >= rows and len(names) > obs.rank:
         # the data, not the robot's structure, limit what can be seen
+        give = "poses give" if n_poses != 1 else "pose gives"
         raise CalibrationError(
-            f"{n_poses} poses give {rows} coordinates, fewer than the "
+            f"{n_poses} {give} {rows} coordinates, fewer than the "
             f"{len(names)} parameters asked for, so they cannot tell which are blind; "
             f"measure at least {math.ceil((len(names) + 1) / (rows / n_poses))} poses "
             f"({rows / n_poses:.3g} coordinate{'s' * (rows != n_poses)} a pose) or ask for "
