@@ -85,3 +85,19 @@ def test_validation_refits_a_remounted_probe_with_its_orientation():
     assert v.before.rms > 10 * v.after.rms  # the DH errors the calibration fixed
     assert v.rotation_after.rms < 1.3 * np.sqrt(3) * 1e-4
     assert "(deg, orientation)" in str(v)
+
+
+def test_validation_says_when_the_measurements_are_not_of_this_robot():
+    import warnings
+
+    import pytest
+
+    ur5e, kr16 = cc.load_robot("ur5e"), cc.load_robot("kr16_2")
+    other = cc.simulate(kr16, cc.poses.uniform(kr16, 40, seed=1))
+    with pytest.warns(UserWarning, match=r"ur5e misses these measurements by .* mm RMS"):
+        cc.validate(ur5e, other, ur5e)
+    own = cc.simulate(ur5e.with_deviations({"a2": 2e-3}), cc.poses.uniform(ur5e, 40, seed=1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # 2 mm of an uncalibrated robot: no warning
+        result = cc.validate(ur5e, own, ur5e)
+    assert result.after.rms > 1e-4

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,7 +132,21 @@ def validate(calibrated: Robot, measurements: Measurements, nominal: Robot, came
         nominal = nominal.with_points(calibrated.points)
     before, rotation_before = refit_frames(nominal, measurements)
     after, rotation_after = refit_frames(calibrated, measurements)
+    reach = calibrated.reach
+    if reach and after.rms > MISFIT * reach:
+        warnings.warn(
+            f"{calibrated.name} misses these measurements by {after.rms * 1e3:.4g} mm RMS "
+            f"({after.rms / reach:.0%} of its reach) even with its frames refitted: are they "
+            "this robot's, with the joints in its order, zeros and units?",
+            stacklevel=2,
+        )
     return Validation(before, after, measurements.n_poses, rotation_before, rotation_after)
+
+
+MISFIT = 0.02
+"""Fraction of a robot's reach above which its held-out RMS error, frames refitted, says
+the measurements are not of this robot (or not in its joint conventions): calibrated arms
+miss by well under 0.1 %, uncalibrated ones by under 0.5 %."""
 
 
 def split(measurements, fraction: float, seed=0):
