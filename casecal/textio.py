@@ -71,7 +71,8 @@ def write_together(files) -> None:
     FIFO (``/dev/null``, a named pipe, or a link to one) is written into, as the shell's
     ``>`` does, never replaced; ``-``, ``/dev/stdout``, ``/dev/stderr`` and ``/dev/fd/N``
     are written into the open descriptor (``>> log`` appends). A read-only file is refused,
-    as the shell refuses it. Temporary files that killed runs left beside a target are
+    as the shell refuses it. A target's folder is made if it is one new folder (and removed
+    again if nothing could be written). Temporary files that killed runs left beside a target are
     removed (only names of the pattern above whose process no longer runs on this host).
 
     Each file is recorded (see `recording`) the moment its rename is done, so an
@@ -89,11 +90,14 @@ def write_together(files) -> None:
         An empty name, a folder, a block device or socket, or a write the system refused
         (naming the file and the reason).
     """
-    staged, renamed = [], []
+    staged, renamed, made = [], [], []
     try:
         targets = [(check_target(path), _bytes(text)) for path, text in files]
         for target, data in targets:
             if not isinstance(target, int) and not _special(target):
+                if not target.parent.is_dir() and target.parent.parent.is_dir():
+                    target.parent.mkdir()  # one new folder, made as late as this
+                    made.append(target.parent)
                 _sweep(target)
                 staged.append((_stage(target, data), target, data))
         for _, target, _ in staged:
@@ -117,6 +121,9 @@ def write_together(files) -> None:
     finally:
         for tmp, _, _ in staged:
             Path(tmp).unlink(missing_ok=True)
+        for folder in made if not renamed else ():  # nothing written: no folder either
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only if empty
 
 
 def _bytes(text: str | bytes) -> bytes:
@@ -253,11 +260,8 @@ def _write_through(target: Path | int, data: bytes) -> None:
 
 
 def _stage(target: Path, data: bytes) -> str:
-    """`data` in a temporary file beside `target` (its folder made if it is one new
-    folder), with a new file's mode; its path."""
+    """`data` in a temporary file beside `target`, with a new file's mode; its path."""
     try:
-        if not target.parent.is_dir() and target.parent.parent.is_dir():
-            target.parent.mkdir(exist_ok=True)  # made as late as this: a refusal makes none
         fd, tmp = tempfile.mkstemp(
             prefix=f".{_stem(target)}.casecal-{os.getpid()}-", suffix=".tmp", dir=target.parent
         )

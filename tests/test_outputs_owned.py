@@ -317,3 +317,18 @@ def test_overwrite_before_or_after_the_command(folder, where):
     argv = ["--overwrite", *argv] if where == "before" else [*argv, "--overwrite"]
     assert main(argv) == 0
     assert (folder / "u.csv").read_text().startswith("q1_deg")
+
+
+def test_a_write_that_fails_leaves_no_new_folder(folder, capsys, monkeypatch):
+    import errno
+
+    real = os.fdopen
+
+    def full_disk(fd, *args, **kwargs):
+        real(fd, *args, **kwargs).close()
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fdopen", full_disk)
+    assert main(["simulate", "rr", "--poses", "3", "-o", "new/s.csv"]) == 2
+    assert "No space left on device; no file was changed" in capsys.readouterr().err
+    assert not (folder / "new").exists()
