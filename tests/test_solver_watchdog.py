@@ -28,6 +28,7 @@ class Curved:
         self.y = self.f(self.true) + rng.normal(scale=rng.choice([1e-6, 1e-3, 1e-1]), size=60)
         self.names = ("a", "b", "c", "d")
         self.w_flat = np.ones(60)
+        self.observed_rows = 60
 
     def f(self, p):
         a, b, c, d = p
@@ -74,6 +75,7 @@ class Cubic:
 
     names = ("x",)
     w_flat = np.ones(101)
+    observed_rows = 101
     y = np.ones(101)
 
     def u(self, x):

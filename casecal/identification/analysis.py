@@ -337,7 +337,7 @@ def _expression(coeffs: np.ndarray, members, direction: bool = False) -> str:
         sign = "-" if c < 0 else "+"
         mag = abs(c)
         u = unit(name)
-        if np.isclose(mag, 1.0, rtol=1e-3) and u == ref_unit:
+        if abs(mag - 1.0) <= 1e-3 + 1e-8 and u == ref_unit:  # np.isclose(mag, 1, rtol=1e-3)
             term = name
         else:
             scale = (

@@ -289,12 +289,18 @@ class Problem:
             return whole
         return whole.columns(self.take)
 
-    def _observed(self, linear: Reduction) -> Reduction:
-        """`linear` counting only rows of non-zero weight: a pose a robust loss left out is
-        no observation (its rows would inflate the degrees of freedom)."""
-        if self._rows_of[0] is not self.w_flat:  # a pass over N rows: once per weights
+    @property
+    def observed_rows(self) -> int:
+        """Rows of non-zero weight: the observations (a pose a robust loss left out and a
+        coordinate not measured are none). Counted once per weights: a pass over N rows."""
+        if self._rows_of[0] is not self.w_flat:
             self._rows_of = (self.w_flat, int(np.count_nonzero(self.w_flat)))
-        rows = self._rows_of[1]
+        return self._rows_of[1]
+
+    def _observed(self, linear: Reduction) -> Reduction:
+        """`linear` counting only rows of non-zero weight (`observed_rows`): a pose left out
+        would inflate the degrees of freedom."""
+        rows = self.observed_rows
         return linear if rows == linear.rows else dataclasses.replace(linear, rows=rows)
 
     def _from_wider(self, at: tuple) -> Reduction | None:

@@ -314,7 +314,7 @@ def check_analysis(full: Problem) -> Observability:
     """Identifiability at `full`'s robot, refusing data that cannot decide it."""
     names = full.names
     obs = analyse(full.reduced(np.zeros(len(names))).R, names, full.q.shape[0])
-    n_poses, rows = full.q.shape[0], int(np.count_nonzero(full.w_flat))
+    n_poses, rows = full.q.shape[0], full.observed_rows
     if obs.rank >= rows and len(names) > obs.rank:
         # the data, not the robot's structure, limit what can be seen
         give = "poses give" if n_poses != 1 else "pose gives"

@@ -69,7 +69,7 @@ step may cross into another basin (a camera turned half a turn), it is halved at
 
 def _variance(problem: Problem, cost: float) -> float:
     """The residual variance (in the cost's units) at `cost`: 2 cost / (rows - k)."""
-    dof = np.count_nonzero(problem.w_flat) - len(problem.names)  # rows not measured: none
+    dof = problem.observed_rows - len(problem.names)  # rows not measured: none
     return 2.0 * cost / max(dof, 1)
 
 
