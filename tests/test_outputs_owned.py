@@ -101,6 +101,15 @@ def test_dash_is_standard_output_not_a_file_named_dash(folder, capfd):
     assert not (folder / "-").exists()
 
 
+@pytest.mark.parametrize("argv", [["identify", "rr", "m.csv", "-o"], ["convert", "rr"]])
+def test_a_robot_file_to_standard_output_is_refused_in_words(folder, capsys, argv):
+    before = sorted(p.name for p in folder.iterdir())
+    assert main([*argv, "-"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot go to standard output ('-')" in err and ".toml" in err, err
+    assert sorted(p.name for p in folder.iterdir()) == before
+
+
 def test_without_a_register_nothing_is_lost_and_the_refusal_says_how(folder, capsys, register):
     (folder / "blocked").write_text("a file where the register's folder would be")
     import casecal.ownership as o

@@ -88,9 +88,15 @@ def export(robot, path) -> Export:
                     "keep them, and use casecal compensate, which applies the full model"
                 ),
             )
+    elif str(path) == "-":
+        raise CalibrationError(
+            "a robot file cannot go to standard output ('-'): its format comes from the "
+            "file name's extension; give a name ending in .toml, .urdf or .yaml (UR kinematics)"
+        )
     else:
         raise CalibrationError(
-            f"{path}: unknown robot file type {suffix!r}; use .toml, .urdf or .yaml (UR kinematics)"
+            f"{path}: unknown robot file type {suffix or '(no extension)'}; use .toml, .urdf "
+            "or .yaml (UR kinematics)"
         )
     return verified(path, text, notes, contract)
 
