@@ -28,7 +28,7 @@ import numpy as np
 
 from .._threads import cores, thread_map
 from ..errors import CalibrationError
-from . import _native, _vectorised
+from . import _native, _numpy_cache, _vectorised
 
 if TYPE_CHECKING:
     import casadi as ca
@@ -84,9 +84,10 @@ or more without a kernel (module doc); infinite once the kind has compiled by th
 _SPENT_LOCK = threading.Lock()
 
 
-def compile_seconds(function: ca.Function) -> float:
-    """The estimated seconds to generate and compile `function`'s kernel (the constants)."""
-    return COMPILE_SECONDS_BASE + COMPILE_SECONDS_PER_INSTRUCTION * function.n_instructions()
+def compile_seconds(instructions: int) -> float:
+    """The estimated seconds to generate and compile the kernel of a one-pose Function of
+    `instructions` instructions (the constants)."""
+    return COMPILE_SECONDS_BASE + COMPILE_SECONDS_PER_INSTRUCTION * instructions
 
 
 def spent(chain: Chain, kind: str) -> float:
@@ -120,6 +121,7 @@ class Evaluator:
         self._native_tried = False
         self._vectorised_fn = None
         self._vectorised_tried = False
+        self._cache_looked = False  # the numpy evaluator's disk cache, looked up once
 
     @property
     def function(self) -> ca.Function:
@@ -187,27 +189,55 @@ class Evaluator:
         """
         if n >= COMPILE_LARGE_BATCH or _native.is_cached(self._key()):
             return True
-        function = self.function
-        if function.n_instructions() > COMPILE_MAX_INSTRUCTIONS:
+        instructions = self._instructions()
+        if instructions > COMPILE_MAX_INSTRUCTIONS:
             return False  # numpy for now; a large batch may still compile it
-        if at_once or spent(self.chain, self.kind) >= compile_seconds(function):
+        if at_once or spent(self.chain, self.kind) >= compile_seconds(instructions):
             with _SPENT_LOCK:  # the kind's later column sets compile at once
                 _SPENT.setdefault(self.chain, {})[self.kind] = float("inf")
             return True
         return False
 
+    def _instructions(self) -> int:
+        """The one-pose Function's instruction count: from the numpy evaluator's cache
+        entry when there is one, so that a warm process builds no CasADi graph."""
+        if self._function is None and self._cached_vectorised() is not None:
+            return self._vectorised_fn.n_instructions
+        return self.function.n_instructions()
+
+    def _cached_vectorised(self):
+        """The numpy evaluator from the disk cache (looked up once), or None."""
+        if not self._vectorised_tried and not self._cache_looked:
+            with BUILDING:
+                if not self._vectorised_tried and not self._cache_looked:
+                    found = _numpy_cache.load(self._key())
+                    if found is not None:
+                        try:
+                            self._vectorised_fn = _vectorised.Vectorised.from_code(*found)
+                            self._vectorised_tried = True
+                        except (KeyError, TypeError, ValueError) as exc:  # verified, yet wrong
+                            log.warning("cached numpy evaluator unusable (%s); rebuilding", exc)
+                    self._cache_looked = True
+        return self._vectorised_fn
+
     def _vectorised(self, n: int):
-        """The numpy evaluator of the instruction list (`_vectorised`) where it serves."""
+        """The numpy evaluator of the instruction list (`_vectorised`) where it serves:
+        from the disk cache, else translated from the Function (and then cached)."""
         backend = backend_choice()
         if backend == "casadi" or (backend == "auto" and n < COMPILE_MIN_POSES):
             return None
-        if not self._vectorised_tried:
+        if self._cached_vectorised() is None and not self._vectorised_tried:
             with BUILDING:
                 if not self._vectorised_tried:
                     try:
-                        self._vectorised_fn = _vectorised.Vectorised(self.function)
+                        built = _vectorised.Vectorised(self.function)
                     except _vectorised.Unsupported as exc:
                         log.info("numpy evaluation unavailable (%s); using CasADi's", exc)
+                    else:
+                        _numpy_cache.store(
+                            self._key(), built.code, built.n_out, built.n_instructions
+                        )
+                        self._vectorised_fn = built
                     self._vectorised_tried = True
         return self._vectorised_fn
 

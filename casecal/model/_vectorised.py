@@ -112,10 +112,22 @@ class Vectorised:
     def __init__(self, function: ca.Function):
         if not function.is_a("SXFunction"):
             raise Unsupported("only SX Functions have an instruction list to translate")
+        code = compile(source(function), f"<casecal {function.name()}>", "exec")
+        self._set(code, function.nnz_out(0), function.n_instructions())
+
+    @classmethod
+    def from_code(cls, code, n_out: int, n_instructions: int) -> Vectorised:
+        """The evaluator whose translated source compiled to `code` (cached on disk,
+        `casecal.model._numpy_cache`): no CasADi Function needed."""
+        self = cls.__new__(cls)
+        self._set(code, n_out, n_instructions)
+        return self
+
+    def _set(self, code, n_out: int, n_instructions: int) -> None:
         namespace = {"np": np}
-        exec(compile(source(function), f"<casecal {function.name()}>", "exec"), namespace)
+        exec(code, namespace)
         self._evaluate = namespace["_evaluate"]
-        self.n_out = function.nnz_out(0)
+        self.code, self.n_out, self.n_instructions = code, n_out, n_instructions
 
     def __call__(self, q: np.ndarray, p: np.ndarray) -> np.ndarray:
         n = q.shape[0]

@@ -1,0 +1,141 @@
+"""The numpy evaluator's compiled Python code, cached on disk beside the C kernels.
+
+Where no kernel is compiled (no C compiler, ``CASECAL_BACKEND=numpy``, a Function too long
+for GCC such as an elastic humanoid's Jacobian of 100,000 instructions, or one not yet worth
+compiling), every new process had built the CasADi Function, translated its instruction
+list to Python (`casecal.model._vectorised`) and compiled that: 1.6 s for the humanoid's
+Jacobian, every time. Its code object is cached here, as Python caches a module's bytecode,
+so a later process loads it in milliseconds without building any CasADi graph.
+
+One file per evaluator, ``casecal_<digest>.numpy``: a line of JSON (the digest of its key,
+Python's bytecode magic number, the payload's size and SHA-256, the evaluator's output size
+and instruction count), then the zlib-compressed `marshal` of the code. The digest hashes the
+key (structure, output, columns), everything the C kernels' digest covers
+(`casecal.model._native.fingerprint`) and the translator's own source. A file that fails any
+check (truncated, flipped bytes, another evaluator's, another Python's) is removed and
+rebuilt with one warning; marshal never reads unverified bytes. Something that is not a
+regular file in its place is left alone. A cache that cannot be written costs only the
+rebuild, said once per process.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import logging
+import marshal
+import os
+import tempfile
+import types
+import zlib
+from pathlib import Path
+
+from .._cache import cache_dir
+from . import _native
+
+log = logging.getLogger(__name__)
+
+SUFFIX = ".numpy"
+
+_FINGERPRINT: str | None = None
+
+
+def _fingerprint() -> str:
+    """What a cached code object depends on besides its key."""
+    global _FINGERPRINT
+    if _FINGERPRINT is None:
+        here = Path(__file__).parent
+        text = _native.fingerprint() + importlib.util.MAGIC_NUMBER.hex()
+        text += "".join((here / f).read_text() for f in ("_vectorised.py", "_numpy_cache.py"))
+        _FINGERPRINT = hashlib.sha256(text.encode()).hexdigest()
+    return _FINGERPRINT
+
+
+def _named(key) -> tuple[str, Path]:
+    """The digest of evaluator `key` and where its code is cached."""
+    digest = hashlib.sha256((_fingerprint() + repr(key)).encode()).hexdigest()[:24]
+    return digest, cache_dir() / f"casecal_{digest}{SUFFIX}"
+
+
+def load(key) -> tuple[types.CodeType, int, int] | None:
+    """``(code, n_out, n_instructions)`` of evaluator `key` from the cache, or None.
+
+    None when it is not cached, the cache cannot be read, or the file fails a check (then
+    it is removed, with a warning, so that the caller's rebuild replaces it).
+    """
+    try:
+        digest, path = _named(key)
+        if not path.is_file():
+            return None  # absent; or not a regular file, which is not ours to touch
+        data = path.read_bytes()
+    except (OSError, ValueError):
+        return None
+    found, problem = _verified(data, digest)
+    if found is not None:
+        return found
+    log.warning("cached numpy evaluator %s is damaged (%s); rebuilding it", path.name, problem)
+    try:
+        path.unlink()
+    except OSError:
+        pass
+    return None
+
+
+def _verified(data: bytes, digest: str) -> tuple[tuple | None, str | None]:
+    """The cached entry in `data` if every check passes, else (None, why)."""
+    head, newline, payload = data.partition(b"\n")
+    try:
+        record = json.loads(head) if newline else None
+    except ValueError:
+        record = None
+    fields = {"key": str, "magic": str, "size": int, "sha256": str, "n_out": int}
+    fields["n_instructions"] = int
+    if not isinstance(record, dict) or any(type(record.get(f)) is not t for f, t in fields.items()):
+        return None, "its header is garbled"
+    if record["key"] != digest:
+        return None, "it holds another evaluator"
+    if record["magic"] != importlib.util.MAGIC_NUMBER.hex():
+        return None, "another Python wrote it"
+    if len(payload) != record["size"]:
+        return None, f"{len(payload)} bytes instead of {record['size']}"
+    if hashlib.sha256(payload).hexdigest() != record["sha256"]:
+        return None, "its checksum does not match"
+    try:
+        code = marshal.loads(zlib.decompress(payload))
+    except (ValueError, EOFError, TypeError, zlib.error):
+        return None, "its code does not load"
+    if not isinstance(code, types.CodeType):
+        return None, "it holds no code"
+    return (code, record["n_out"], record["n_instructions"]), None
+
+
+def store(key, code: types.CodeType, n_out: int, n_instructions: int) -> None:
+    """Cache evaluator `key`'s `code` (atomically; a failure only costs the next rebuild)."""
+    try:
+        digest, path = _named(key)
+        payload = zlib.compress(marshal.dumps(code), 1)
+        record = {
+            "key": digest,
+            "magic": importlib.util.MAGIC_NUMBER.hex(),
+            "size": len(payload),
+            "sha256": hashlib.sha256(payload).hexdigest(),
+            "n_out": n_out,
+            "n_instructions": n_instructions,
+        }
+        if os.path.lexists(path) and not path.is_file():
+            return  # a folder or a special file where ours goes: not ours to replace
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _native._sweep(path.parent)
+        # in a build folder of its own: a killed write leaves what the next sweep removes
+        with tempfile.TemporaryDirectory(prefix=_native.BUILD_PREFIX, dir=path.parent) as tmp:
+            part = Path(tmp, path.name)
+            part.write_bytes(json.dumps(record).encode() + b"\n" + payload)
+            os.replace(part, path)
+    except (OSError, ValueError) as exc:
+        problem = _native._cache_problem(exc, cache_dir()) if isinstance(exc, OSError) else None
+        _native._say_once(
+            f"numpy evaluators are not cached ({problem or _native._reason(exc)}); "
+            "each process translates them again",
+            topic="numpy cache",
+        )
