@@ -161,6 +161,14 @@ def test_report_accepts_good_addresses_and_workers(tmp_path, monkeypatch, no_stu
     assert no_studies[1][1]["scheduler"] == "tcp://localhost:8786"
 
 
+def test_quiet_drops_the_reports_progress_lines(tmp_path, monkeypatch, no_studies):
+    monkeypatch.chdir(tmp_path)
+    assert run(["report", "-o", "rep"])[0] == 0
+    assert run(["report", "-q", "-o", "rep"])[0] == 0
+    assert run(["-q", "report", "-o", "rep"])[0] == 0
+    assert [k["progress"] for _, k in no_studies] == [True, False, False]
+
+
 def test_the_library_refuses_zero_workers_and_bad_addresses():
     with pytest.raises(CalibrationError, match="positive"):
         Executor("processes", workers=0)

@@ -66,7 +66,7 @@ def test_a_warm_process_builds_no_graph_and_gets_the_same_bits(good, tmp_path, b
 
 def test_the_cached_values_are_casadis(good, tmp_path):
     """The translated code against CasADi's own evaluation of the same Functions."""
-    cache, values = good
+    _, values = good
     code, err, casadi = probe(tmp_path / "empty", tmp_path / "casadi.npy", False, "casadi")
     assert code == 0, err
     assert np.allclose(values, casadi, rtol=0, atol=1e-12)
@@ -164,7 +164,7 @@ def test_what_is_not_ours_in_an_entrys_place_is_left_alone(good, tmp_path):
 
 
 def test_a_cache_that_cannot_be_written_costs_only_the_rebuild(good, tmp_path):
-    cache, values = good
+    _, values = good
     blocked = tmp_path / "file"
     blocked.write_text("a file where the cache folder would be")
     code, err, got = probe(blocked / "cache", tmp_path / "a.npy", warm=False)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import argtypes
-from .common import command, say
+from .common import Output, command, say
 
 
 def add_parser(sub) -> None:
@@ -66,5 +66,6 @@ def run(args: argparse.Namespace) -> None:
         executor=executor,
         workers=args.workers,
         scheduler=args.scheduler,
+        progress=not Output.quiet,  # -q drops the studies' progress lines too
         log=lambda m: say(m, flush=True),
     )

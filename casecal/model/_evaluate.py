@@ -13,6 +13,8 @@ it does at once for that kind's later column sets. The total is then at most abo
 the better choice in hindsight (compile at once, or never), and a single fit of a few
 hundred poses no longer waits seconds for GCC. Batches of `COMPILE_LARGE_BATCH` poses or
 more compile at once; ``CASECAL_BACKEND=c`` compiles every batch of `COMPILE_MIN_POSES`.
+numpy's translation of a Function is cached on disk too (`casecal.model._numpy_cache`): a
+process that finds it there, or the kernel, builds no CasADi graph.
 """
 
 from __future__ import annotations
