@@ -200,7 +200,7 @@ class Problem:
         return p.tobytes() + self.p0[self.chain.anchor_index].tobytes()
 
     def _evaluation_key(self, kind: str, p: np.ndarray) -> tuple:
-        return (kind, self.robot.structure, self._poses, self._at(p))
+        return (kind, self.chain.structure, self._poses, self._at(p))
 
     def _evaluate(self, kind: str, p: np.ndarray) -> np.ndarray:
         key = self._evaluation_key(kind, p)
@@ -270,7 +270,7 @@ class Problem:
             Of the columns `names`, with ``rows`` the N · rows-per-pose residuals.
         """
         p = self.p(x)
-        at = ("reduced", self.robot.structure, self._at(p), self._weights)
+        at = ("reduced", self.chain.structure, self._at(p), self._weights)
         whole = self._memo.get((*at, self.kernel_columns)) or self._from_wider(at)
         if whole is None and not exact:
             r = self.residual(x) if r is None else r
@@ -321,7 +321,7 @@ class Problem:
         return other
 
     def _normal_key(self, p: np.ndarray) -> tuple:
-        return ("normal", self.robot.structure, self._at(p), self._weights, self.kernel_columns)
+        return ("normal", self.chain.structure, self._at(p), self._weights, self.kernel_columns)
 
     def _cuts(self) -> tuple[list[slice], list[slice], tuple[int, int, int]]:
         """The batches' slices of the poses and of the residual vector, and the shape of a

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import InitVar, dataclass, field
@@ -184,6 +185,14 @@ class Robot:
     auto_beta: InitVar[bool] = True
 
     def __post_init__(self, auto_beta: bool) -> None:
+        try:
+            self._settle(auto_beta)
+        finally:  # the checks may ask for the structure before the fields are settled
+            self.__dict__.pop("structure", None)
+
+    def _settle(self, auto_beta: bool) -> None:
+        """Check the fields and put them in their canonical form (tuples, refreshed terms,
+        automatic βs)."""
         from .parameters import checked_sizes
         from .terms import check_terms, refreshed
 
@@ -517,9 +526,11 @@ class Robot:
         """One letter per joint, e.g. ``"RRPR"``."""
         return "".join(j.type for j in self.joints)
 
-    @property
+    @functools.cached_property
     def structure(self) -> kinematics.Structure:
-        """What the CasADi graph depends on (everything but the numbers)."""
+        """What the CasADi graph depends on (everything but the numbers).
+
+        Computed once per robot (it is frozen; memo keys ask for it at every evaluation)."""
         shapes = tuple(dataclasses.replace(t, values=()) for t in self.terms)
         extra = {"terms": shapes, "gravity": tuple(self.gravity)} if self.terms else {}
         if self.inputs:
