@@ -95,13 +95,33 @@ def flipped(path, other):
 def resigned_garbage(path, other):
     """Bytes that are not code, with a header that matches them: marshal must not read
     what it cannot trust, and what it reads must be code."""
-    import hashlib
     import marshal
     import zlib
 
+    from casecal.model._numpy_cache import _checksum
+
     record, _ = _header(path)
     payload = zlib.compress(marshal.dumps([1, 2, 3]))
-    record.update(size=len(payload), sha256=hashlib.sha256(payload).hexdigest())
+    record["size"] = len(payload)
+    record["sha256"] = _checksum(record, payload)
+    _write(path, record, payload)
+
+
+def edited_count(path, other):
+    """The header's output count edited: the checksum covers it."""
+    record, payload = _header(path)
+    record["n_out"] += 1
+    _write(path, record, payload)
+
+
+def resigned_count(path, other):
+    """A wrong output count that the checksum vouches for: the evaluator's own shape
+    decides, not the header (a wrong count had raised in every process)."""
+    from casecal.model._numpy_cache import _checksum
+
+    record, payload = _header(path)
+    record["n_out"] += 3
+    record["sha256"] = _checksum(record, payload)
     _write(path, record, payload)
 
 
@@ -125,9 +145,26 @@ def empty(path, other):
     path.write_bytes(b"")
 
 
+def deeply_nested_header(path, other):
+    """JSON nested deeper than the parser recurses."""
+    _, payload = _header(path)
+    path.write_bytes(b"[" * 100_000 + b"\n" + payload)
+
+
 @pytest.mark.parametrize(
     "how",
-    [truncated, flipped, resigned_garbage, swapped, another_python, garbled_header, empty],
+    [
+        truncated,
+        flipped,
+        resigned_garbage,
+        edited_count,
+        resigned_count,
+        swapped,
+        another_python,
+        garbled_header,
+        empty,
+        deeply_nested_header,
+    ],
     ids=lambda f: f.__name__,
 )
 def test_a_damaged_entry_evaluates_right_and_is_repaired(good, tmp_path, how):
@@ -161,6 +198,7 @@ def test_what_is_not_ours_in_an_entrys_place_is_left_alone(good, tmp_path):
     assert np.array_equal(got, values)
     assert (mine / first.name / "keep.txt").read_text() == "a user's file"
     assert not (mine / second.name).is_file() and (mine / second.name).exists()
+    assert err.count("is not a regular file") == 1, err  # said, once, not silent
 
 
 def test_a_cache_that_cannot_be_written_costs_only_the_rebuild(good, tmp_path):

@@ -212,7 +212,7 @@ class Evaluator:
         if not self._vectorised_tried and not self._cache_looked:
             with BUILDING:
                 if not self._vectorised_tried and not self._cache_looked:
-                    found = _numpy_cache.load(self._key())
+                    found = _numpy_cache.load(self._key(), int(np.prod(self.shape)))
                     if found is not None:
                         try:
                             self._vectorised_fn = _vectorised.Vectorised.from_code(*found)

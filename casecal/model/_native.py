@@ -129,23 +129,29 @@ def source(function: ca.Function, key: str = "", n_q: int | None = None, joint_t
     )
 
 
-def fingerprint() -> str:
+def _source_fingerprint() -> str:
     """Hash of everything a kernel depends on besides its key: the code that generates it,
-    CasADi's version and the compiler flags. Any change gives new cache entries."""
-    global _FINGERPRINT
-    if _FINGERPRINT is None:
-        here = Path(__file__).parent
-        # parameters.py fixes the layout of p: a change there must not reuse old kernels
-        files = ("kinematics.py", "chainwalk.py", "terms.py", "_native.py", "_trig.py")
-        files += ("parameters.py", "rotation_chart.py")  # which angles are anchored
-        files += ("elastic.py", "masses.py")  # what the gravity terms' functions call
-        text = "".join((here / f).read_text() for f in files)
-        text += ca.__version__ + " ".join(CFLAGS)
-        _FINGERPRINT = hashlib.sha256(text.encode()).hexdigest()
+    CasADi's version and the compiler flags."""
+    here = Path(__file__).parent
+    # parameters.py fixes the layout of p: a change there must not reuse old kernels
+    files = ("kinematics.py", "chainwalk.py", "terms.py", "_native.py", "_trig.py")
+    files += ("parameters.py", "rotation_chart.py")  # which angles are anchored
+    files += ("elastic.py", "masses.py")  # what the gravity terms' functions call
+    files += ("code_key.py",)  # how a user term's code is keyed
+    text = "".join((here / f).read_text() for f in files)
+    text += ca.__version__ + " ".join(CFLAGS)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+# read at import, when the files are the code this process runs: one edited later (an
+# editable install under development) must not key this process's kernels as the new code's
+_FINGERPRINT = _source_fingerprint()
+
+
+def fingerprint() -> str:
+    """Hash of everything a kernel depends on besides its key (`_source_fingerprint`), as
+    the code this process imported. Any change gives new cache entries."""
     return _FINGERPRINT
-
-
-_FINGERPRINT: str | None = None
 
 
 def _named(key) -> tuple[str, Path]:

@@ -8,14 +8,15 @@ Jacobian, every time. Its code object is cached here, as Python caches a module'
 so a later process loads it in milliseconds without building any CasADi graph.
 
 One file per evaluator, ``casecal_<digest>.numpy``: a line of JSON (the digest of its key,
-Python's bytecode magic number, the payload's size and SHA-256, the evaluator's output size
-and instruction count), then the zlib-compressed `marshal` of the code. The digest hashes the
+Python's bytecode magic number, the payload's size, the evaluator's output size and
+instruction count, and a SHA-256 over all of them and the payload), then the
+zlib-compressed `marshal` of the code. The digest hashes the
 key (structure, output, columns), everything the C kernels' digest covers
 (`casecal.model._native.fingerprint`) and the translator's own source. A file that fails any
-check (truncated, flipped bytes, another evaluator's, another Python's) is removed and
-rebuilt with one warning; marshal never reads unverified bytes. Something that is not a
-regular file in its place is left alone. A cache that cannot be written costs only the
-rebuild, said once per process.
+check (truncated, flipped bytes in the code or the header, another evaluator's, another
+Python's) is removed and rebuilt with one warning; marshal never reads unverified bytes.
+Something that is not a regular file in its place is left alone, said once. A cache that
+cannot be written costs only the rebuild, said once per process.
 """
 
 from __future__ import annotations
@@ -38,40 +39,50 @@ log = logging.getLogger(__name__)
 
 SUFFIX = ".numpy"
 
-_FINGERPRINT: str | None = None
 
-
-def _fingerprint() -> str:
+def _source_fingerprint() -> str:
     """What a cached code object depends on besides its key."""
-    global _FINGERPRINT
-    if _FINGERPRINT is None:
-        here = Path(__file__).parent
-        text = _native.fingerprint() + importlib.util.MAGIC_NUMBER.hex()
-        text += "".join((here / f).read_text() for f in ("_vectorised.py", "_numpy_cache.py"))
-        _FINGERPRINT = hashlib.sha256(text.encode()).hexdigest()
-    return _FINGERPRINT
+    here = Path(__file__).parent
+    text = _native.fingerprint() + importlib.util.MAGIC_NUMBER.hex()
+    text += "".join((here / f).read_text() for f in ("_vectorised.py", "_numpy_cache.py"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+# read at import, as `_native`'s: the files as the code this process runs
+_FINGERPRINT = _source_fingerprint()
 
 
 def _named(key) -> tuple[str, Path]:
     """The digest of evaluator `key` and where its code is cached."""
-    digest = hashlib.sha256((_fingerprint() + repr(key)).encode()).hexdigest()[:24]
+    digest = hashlib.sha256((_FINGERPRINT + repr(key)).encode()).hexdigest()[:24]
     return digest, cache_dir() / f"casecal_{digest}{SUFFIX}"
 
 
-def load(key) -> tuple[types.CodeType, int, int] | None:
+def load(key, n_out: int) -> tuple[types.CodeType, int, int] | None:
     """``(code, n_out, n_instructions)`` of evaluator `key` from the cache, or None.
 
-    None when it is not cached, the cache cannot be read, or the file fails a check (then
-    it is removed, with a warning, so that the caller's rebuild replaces it).
+    None when it is not cached, the cache cannot be read, or the file fails a check, one of
+    them that it computes `n_out` numbers per pose (then it is removed, with a warning, so
+    that the caller's rebuild replaces it).
     """
     try:
         digest, path = _named(key)
+        if os.path.lexists(path) and not path.is_file():
+            _native._say_once(
+                f"{path} is not a regular file; numpy evaluators are translated again in "
+                "each process until it is removed",
+                log.warning,
+                "numpy cache",
+            )
+            return None  # a folder or a FIFO is not ours to touch (reading one would wait)
         if not path.is_file():
-            return None  # absent; or not a regular file, which is not ours to touch
+            return None
         data = path.read_bytes()
     except (OSError, ValueError):
         return None
     found, problem = _verified(data, digest)
+    if found is not None and found[1] != n_out:
+        found, problem = None, f"{found[1]} outputs instead of {n_out}"
     if found is not None:
         return found
     log.warning("cached numpy evaluator %s is damaged (%s); rebuilding it", path.name, problem)
@@ -87,7 +98,7 @@ def _verified(data: bytes, digest: str) -> tuple[tuple | None, str | None]:
     head, newline, payload = data.partition(b"\n")
     try:
         record = json.loads(head) if newline else None
-    except ValueError:
+    except (ValueError, RecursionError):  # RecursionError: a header nested 10,000 deep
         record = None
     fields = {"key": str, "magic": str, "size": int, "sha256": str, "n_out": int}
     fields["n_instructions"] = int
@@ -99,7 +110,7 @@ def _verified(data: bytes, digest: str) -> tuple[tuple | None, str | None]:
         return None, "another Python wrote it"
     if len(payload) != record["size"]:
         return None, f"{len(payload)} bytes instead of {record['size']}"
-    if hashlib.sha256(payload).hexdigest() != record["sha256"]:
+    if _checksum(record, payload) != record["sha256"]:
         return None, "its checksum does not match"
     try:
         code = marshal.loads(zlib.decompress(payload))
@@ -108,6 +119,13 @@ def _verified(data: bytes, digest: str) -> tuple[tuple | None, str | None]:
     if not isinstance(code, types.CodeType):
         return None, "it holds no code"
     return (code, record["n_out"], record["n_instructions"]), None
+
+
+def _checksum(record: dict, payload: bytes) -> str:
+    """SHA-256 of `payload` and of every other header field: an edited count is caught
+    like a flipped byte of the code."""
+    head = {f: record[f] for f in ("key", "magic", "size", "n_out", "n_instructions")}
+    return hashlib.sha256(json.dumps(head, sort_keys=True).encode() + payload).hexdigest()
 
 
 def store(key, code: types.CodeType, n_out: int, n_instructions: int) -> None:
@@ -119,10 +137,10 @@ def store(key, code: types.CodeType, n_out: int, n_instructions: int) -> None:
             "key": digest,
             "magic": importlib.util.MAGIC_NUMBER.hex(),
             "size": len(payload),
-            "sha256": hashlib.sha256(payload).hexdigest(),
             "n_out": n_out,
             "n_instructions": n_instructions,
         }
+        record["sha256"] = _checksum(record, payload)
         if os.path.lexists(path) and not path.is_file():
             return  # a folder or a special file where ours goes: not ours to replace
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -725,7 +725,17 @@ class Robot:
         )
 
     def with_terms(self, *terms) -> Robot:
-        """A new Robot with the error terms `terms` (`casecal.model.terms.ErrorTerm`) added."""
+        """A new Robot with the error terms `terms` (`casecal.model.terms.ErrorTerm`) added:
+        ``with_terms(a, b)`` or ``with_terms([a, b])``."""
+        from .terms import ErrorTerm
+
+        if len(terms) == 1 and isinstance(terms[0], (list, tuple)):
+            terms = tuple(terms[0])
+        for term in terms:
+            if not isinstance(term, ErrorTerm):
+                raise CalibrationError(
+                    f"with_terms takes ErrorTerm objects, not {type(term).__name__}"
+                )
         return dataclasses.replace(self, terms=(*self.terms, *terms), auto_beta=False)
 
     def with_compliance(self, joints=None, lateral: bool = False, lumped=None) -> Robot:

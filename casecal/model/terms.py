@@ -14,17 +14,15 @@ ones. The built-in terms use the same mechanism:
 
 A user term: ``ErrorTerm(kind, joint, parameters, build)`` with
 ``build(ctx: TermContext, term: ErrorTerm) -> SX`` (rad, for a revolute joint), attached
-with `Robot.with_terms`. `kind` names the function for the compiled-kernel cache: give it
-a new value whenever the function changes.
+with `Robot.with_terms`. Compiled kernels are cached under a key of the function's code,
+the data it reads and the helpers of the user's own it calls (`casecal.model.code_key`);
+after a change that key cannot see (a method of a class it calls), give `kind` a new value.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
-import hashlib
 import numbers
-import types
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -32,6 +30,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import CalibrationError
+from .code_key import fingerprint
 from .parameters import declare_unit
 
 STANDARD_GRAVITY = 9.80665  # m/s²
@@ -152,65 +151,6 @@ class ErrorTerm:
     def shape(self) -> tuple:
         """What the symbolic graph depends on: everything but the values."""
         return (self.kind, self.joint, self.parameters, self.data, self.target, self.code)
-
-
-def fingerprint(function, _depth: int = 0) -> str:
-    """A hash of a function's code, constants, names, defaults and closure values: the
-    same across processes for the same source, different after an edit.
-
-    Nested code (a comprehension, a lambda) and functions among the closure values are
-    hashed by their code too: their repr holds a memory address, which would key the
-    compiled kernels per process and compile them again in every one.
-    """
-    if _depth > 8:  # a function in its own closure (recursion): its name will do
-        return getattr(function, "__qualname__", type(function).__name__)
-    if isinstance(function, functools.partial):
-        parts = (function.func, function.args, function.keywords)
-    elif hasattr(function, "__code__"):
-        closure = [c.cell_contents for c in (function.__closure__ or ())]
-        # module-level numbers and arrays the code reads are part of what it computes
-        names = _names(function.__code__)
-        module = getattr(function, "__globals__", {})
-        read = [(n, module[n]) for n in sorted(names) if _is_data(module.get(n))]
-        parts = (function.__code__, function.__defaults__, function.__kwdefaults__, closure, read)
-    else:
-        return repr(function)
-    text = repr(_stable(parts, _depth + 1))
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def _names(code: types.CodeType) -> set[str]:
-    """The global names `code` and the code nested in it read."""
-    names = set(code.co_names)
-    for c in code.co_consts:
-        if isinstance(c, types.CodeType):
-            names |= _names(c)
-    return names
-
-
-def _is_data(value) -> bool:
-    return isinstance(value, (numbers.Number, str, bytes, np.ndarray)) or (
-        isinstance(value, (tuple, list)) and all(_is_data(v) for v in value)
-    )
-
-
-def _stable(value, depth: int):
-    """`value` with code objects and functions replaced by what defines them, and arrays
-    by a hash of their bytes (their repr elides the middle of a long one)."""
-    if isinstance(value, np.ndarray):
-        digest = hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest()
-        return ("array", value.dtype.str, value.shape, digest)
-    if isinstance(value, types.CodeType):
-        return (value.co_code, _stable(value.co_consts, depth), value.co_names)
-    if isinstance(value, (tuple, list)):
-        return tuple(_stable(v, depth) for v in value)
-    if isinstance(value, dict):
-        return tuple((k, _stable(v, depth)) for k, v in value.items())
-    if isinstance(value, (set, frozenset)):  # ordered by the per-process hash seed
-        return ("set", tuple(sorted(repr(_stable(v, depth)) for v in value)))
-    if hasattr(value, "__code__") or isinstance(value, functools.partial):
-        return fingerprint(value, depth)
-    return value
 
 
 def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=(), carried=()) -> tuple:
