@@ -160,3 +160,29 @@ def test_with_terms_takes_a_list_and_refuses_what_is_not_a_term():
     assert robot.with_terms([term]).terms == robot.with_terms(term).terms == (term,)
     with pytest.raises(cc.CalibrationError, match="ErrorTerm objects, not str"):
         robot.with_terms("mine")
+
+
+def test_helpers_that_call_each_other_are_keyed_once_each(monkeypatch):
+    """Twelve helpers that all call each other: each is keyed once per key, not once per
+    path through them (11^8 paths had been walked), and recursion ends."""
+    from casecal.model import code_key
+
+    names = [f"h{i}" for i in range(12)]
+    source = "".join(
+        f"def {n}(x):\n    return x if x < 1 else "
+        + " + ".join(f"{m}(x - 1)" for m in names)
+        + "\n"
+        for n in names
+    )
+    space = {"__name__": "not_imported"}  # code run by exec: followed
+    exec(source, space)
+    calls = []
+    real = code_key._Walk.key
+    monkeypatch.setattr(
+        code_key._Walk, "key", lambda self, f, d: calls.append(f) or real(self, f, d)
+    )
+    first = fingerprint(space["h0"])
+    assert len(calls) == 1 + 12 * 12  # the first call, then each reads its twelve names
+    assert fingerprint(space["h0"]) == first
+    space["h7"].__code__ = (lambda x: x).__code__
+    assert fingerprint(space["h0"]) != first  # a change deep in the cycle is seen
