@@ -177,12 +177,265 @@ def test_helpers_that_call_each_other_are_keyed_once_each(monkeypatch):
     space = {"__name__": "not_imported"}  # code run by exec: followed
     exec(source, space)
     calls = []
-    real = code_key._Walk.key
+    real = code_key._Walk.function
     monkeypatch.setattr(
-        code_key._Walk, "key", lambda self, f, d: calls.append(f) or real(self, f, d)
+        code_key._Walk, "function", lambda self, f, d: calls.append(f) or real(self, f, d)
     )
     first = fingerprint(space["h0"])
     assert len(calls) == 1 + 12 * 12  # the first call, then each reads its twelve names
     assert fingerprint(space["h0"]) == first
     space["h7"].__code__ = (lambda x: x).__code__
     assert fingerprint(space["h0"]) != first  # a change deep in the cycle is seen
+
+
+# A user's code before and after an edit that changes what its term computes: files of
+# the user's modules, the term's function being `user_terms.BUILD`. Each edit must change
+# the key (the review of the first version found each of these served old numbers).
+EDITS = {
+    "bound method's instance": (
+        {
+            "user_terms.py": "class T:\n    def __init__(self, s):\n        self.s = s\n"
+            "    def build(self, ctx, term):\n        return self.s * ctx.q[2]\n"
+            "BUILD = T(0.5).build\n"
+        },
+        {"user_terms.py": "T(0.5)->T(2.0)"},
+    ),
+    "callable object's method": (
+        {
+            "user_terms.py": "import dataclasses\n@dataclasses.dataclass\nclass T:\n"
+            "    s: float = 0.5\n    def __call__(self, ctx, term):\n"
+            "        return self.s * ctx.q[2]\nBUILD = T()\n"
+        },
+        {"user_terms.py": "self.s * ->2 * self.s * "},
+    ),
+    "module imported inside the function": (
+        {
+            "user_terms.py": "def BUILD(ctx, term):\n    import user_helpers\n"
+            "    return user_helpers.offset(ctx.q[2])\n",
+            "user_helpers.py": "def offset(x):\n    return 0.5 * x\n",
+        },
+        {"user_helpers.py": "0.5->2.0"},
+    ),
+    "submodule of a user package": (
+        {
+            "user_terms.py": "import upkg.geo\ndef BUILD(ctx, term):\n"
+            "    return upkg.geo.offset(ctx.q[2])\n",
+            "upkg/__init__.py": "",
+            "upkg/geo.py": "def offset(x):\n    return 0.5 * x\n",
+        },
+        {"upkg/geo.py": "0.5->2.0"},
+    ),
+    "CasADi matrix": (
+        {
+            "user_terms.py": "import casadi as ca\nG = ca.DM([0.5, 1.0])\n"
+            "def BUILD(ctx, term):\n    return G[1] * ctx.q[2]\n"
+        },
+        {"user_terms.py": "1.0]->2.0]"},
+    ),
+    "a config object and a dict holding None": (
+        {
+            "user_terms.py": "import types\nCFG = types.SimpleNamespace(s=0.5)\n"
+            "OPT = {'s': 0.5, 'axis': None}\n"
+            "def BUILD(ctx, term):\n    return CFG.s * OPT['s'] * ctx.q[2]\n"
+        },
+        {"user_terms.py": "(s=0.5)->(s=2.0)"},
+    ),
+    "partial and cached helpers": (
+        {
+            "user_terms.py": "import functools\ndef _scale(k, x):\n    return k * x\n"
+            "offset = functools.partial(_scale, 0.5)\n"
+            "@functools.lru_cache\ndef gain(i):\n    return 1.0 + i\n"
+            "def BUILD(ctx, term):\n    return gain(1) * offset(ctx.q[2])\n"
+        },
+        {"user_terms.py": "_scale, 0.5)->_scale, 2.0)"},
+    ),
+    "cached helper's body": (
+        {
+            "user_terms.py": "import functools\n"
+            "@functools.lru_cache\ndef gain(i):\n    return 1.0 + i\n"
+            "def BUILD(ctx, term):\n    return gain(1) * ctx.q[2]\n"
+        },
+        {"user_terms.py": "1.0 + i->3.0 + i"},
+    ),
+    "table of functions and a static method": (
+        {
+            "user_terms.py": "def a(x):\n    return 0.5 * x\nOPS = {'a': a}\n"
+            "class H:\n    @staticmethod\n    def offset(x):\n        return 3.0 * x\n"
+            "def BUILD(ctx, term):\n    return OPS['a'](ctx.q[2]) + H.offset(ctx.q[1])\n"
+        },
+        {"user_terms.py": "0.5 * x->0.7 * x"},
+    ),
+    "static method's body": (
+        {
+            "user_terms.py": "class H:\n    @staticmethod\n    def offset(x):\n"
+            "        return 3.0 * x\n"
+            "def BUILD(ctx, term):\n    return H.offset(ctx.q[1])\n"
+        },
+        {"user_terms.py": "3.0 * x->4.0 * x"},
+    ),
+    "middle of a long array in a closed-over object": (
+        {
+            "user_terms.py": "import dataclasses, numpy as np\n@dataclasses.dataclass\n"
+            "class Cal:\n    table: object\ndef make(cal):\n"
+            "    def build(ctx, term):\n        return float(cal.table[2500]) * ctx.q[2]\n"
+            "    return build\nT = np.ones(5000)\nT[2500] = 0.5\nBUILD = make(Cal(T))\n"
+        },
+        {"user_terms.py": "T[2500] = 0.5->T[2500] = 2.0"},
+    ),
+    "argument names swapped": (
+        {
+            "user_terms.py": "def f(a, b):\n    return a - 2 * b\n"
+            "def BUILD(ctx, term):\n    return f(a=ctx.q[1], b=ctx.q[2])\n"
+        },
+        {"user_terms.py": "def f(a, b):\n    return a - 2 * b->def f(b, a):\n    return b - 2 * a"},
+    ),
+}
+
+
+def _key_of_build(folder, files):
+    """The key of `user_terms.BUILD` imported from `files` written into `folder`."""
+    from casecal.model.code_key import code_key
+
+    for name, text in files.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text(text)
+    mine = ("user_terms", "user_helpers", "upkg", "upkg.geo")
+    for name in mine:
+        sys.modules.pop(name, None)
+    sys.path.insert(0, str(folder))
+    importlib.invalidate_caches()
+    try:
+        return code_key(importlib.import_module("user_terms").BUILD)
+    finally:
+        sys.path.remove(str(folder))
+        for name in mine:
+            sys.modules.pop(name, None)
+
+
+@pytest.mark.parametrize("case", list(EDITS))
+def test_an_edit_changes_the_key(tmp_path, case):
+    files, edits = EDITS[case]
+    edited = dict(files)
+    for name, change in edits.items():
+        old, new = change.split("->")
+        assert old in files[name]
+        edited[name] = files[name].replace(old, new)
+    before = _key_of_build(tmp_path / "a", files)
+    again = _key_of_build(tmp_path / "b", files)
+    after = _key_of_build(tmp_path / "c", edited)
+    assert before.unseen == after.unseen == ()  # all of it keyed, none left to chance
+    assert before.digest == again.digest  # the same code in another folder: the same key
+    assert after.digest != before.digest
+
+
+def test_casecals_own_terms_are_keyed_whole():
+    """Gravity compliance (masses known, lumped, lateral on a tree) and harmonics: none of
+    them may fall back to the uncached path."""
+    import dataclasses
+
+    import casecal as cc
+    from casecal.report import studies_compliance, studies_elastic
+
+    rigid = cc.load_robot("kr15_2")
+    heavy = dataclasses.replace(rigid, inertials=studies_compliance.INERTIALS, auto_beta=False)
+    robots = [heavy.with_compliance([2, 3]), rigid.with_compliance([2, 3])]
+    robots += list(studies_elastic.models().values())
+    robots += [rigid.with_joint_harmonics(2, 2)]
+    terms = [t for r in robots for t in r.terms]
+    assert len({t.kind for t in terms}) >= 4
+    assert all(t.keyed for t in terms), [t.code for t in terms if not t.keyed]
+
+
+def test_odd_functions_are_keyed_without_a_traceback():
+    """An empty closure cell, data that holds itself, data nested past the recursion
+    limit, builtins and ufuncs: a key, and what it misses said."""
+    from casecal.model.code_key import code_key
+
+    def later():
+        return cell  # assigned after: the cell is empty now
+
+    looped = [1.0]
+    looped.append(looped)
+    deep = [0.0]
+    for _ in range(5000):
+        deep = [deep]
+
+    assert code_key(later).unseen == ()
+    assert code_key(lambda ctx, t: looped[0] * ctx.q[0]).unseen == ()
+    assert code_key(lambda ctx, t: deep[0] * ctx.q[0]).unseen == ("data nested too deep",)
+    for f in (abs, np.sin, np.vectorize(abs)):
+        assert code_key(f).digest
+    cell = 1.0
+
+
+UNKEYED = textwrap.dedent(
+    """
+    import sys, threading, numpy as np, casecal as cc
+    from casecal.model.terms import ErrorTerm
+    GUARD = threading.Lock()  # shows only its memory address: its state cannot be keyed
+    def build(ctx, term):
+        with GUARD:
+            return ctx.p("k") * ctx.q[2]
+    term = ErrorTerm("guarded", 2, ("k",), build)
+    assert not term.keyed, term.code
+    r = cc.load_robot("puma560").with_terms(term).with_parameters({"k": 0.01})
+    q = cc.poses.uniform(r, 300, seed=0)
+    J, _ = r.position_jacobian(q, ["theta*", "k"])
+    np.save(sys.argv[1], np.concatenate([r.position(q).ravel(), J.ravel()]))
+    """
+)
+
+
+def test_a_term_its_key_cannot_cover_is_never_cached_on_disk(tmp_path):
+    """Forced to C, it still evaluates (by numpy, in the process), says why once, and
+    writes nothing to the cache; the numbers are those of CasADi's own evaluation."""
+    env = {**os.environ, "CASECAL_CACHE": str(tmp_path / "cache"), "CASECAL_BACKEND": "c"}
+
+    def run(name, backend):
+        done = subprocess.run(
+            [sys.executable, "-c", UNKEYED, str(tmp_path / name)],
+            env={**env, "CASECAL_BACKEND": backend},
+            capture_output=True,
+            text=True,
+        )
+        assert done.returncode == 0, done.stderr
+        return np.load(tmp_path / name), done.stderr
+
+    got, said = run("c.npy", "c")
+    assert said.count("'guarded'") == 1 and "not cached on disk" in said, said
+    assert not (tmp_path / "cache").exists() or not list((tmp_path / "cache").iterdir())
+    reference, _ = run("casadi.npy", "casadi")
+    assert np.allclose(got, reference, rtol=0, atol=1e-12)
+
+
+KEYS = textwrap.dedent(
+    """
+    import types, casecal as cc
+    from casecal.model.code_key import code_key
+    class Gain:
+        def __init__(self, s):
+            self.s = s
+        def build(self, ctx, term):
+            return self.s * ctx.q[2]
+    config = types.SimpleNamespace(s=0.5, names={"a", "b", "c", "d"})
+    table = {k: len(k) for k in {"alpha", "beta", "gamma", "delta"}}
+    def closed(ctx, term):
+        return config.s * table["beta"] * ctx.q[2]
+    print([code_key(f) for f in (Gain(0.5).build, closed)])
+    """
+)
+
+
+def test_objects_sets_and_methods_key_the_same_in_every_process():
+    """No memory address and no hash order in a key, or every process compiles again."""
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", KEYS],
+            capture_output=True,
+            text=True,
+            check=True,
+            env={**os.environ, "PYTHONHASHSEED": seed},
+        ).stdout
+        for seed in ("1", "2", "3")
+    ]
+    assert "unseen=()" in runs[0] and runs[0] == runs[1] == runs[2]

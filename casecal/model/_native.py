@@ -132,13 +132,11 @@ def source(function: ca.Function, key: str = "", n_q: int | None = None, joint_t
 def _source_fingerprint() -> str:
     """Hash of everything a kernel depends on besides its key: the code that generates it,
     CasADi's version and the compiler flags."""
-    here = Path(__file__).parent
-    # parameters.py fixes the layout of p: a change there must not reuse old kernels
-    files = ("kinematics.py", "chainwalk.py", "terms.py", "_native.py", "_trig.py")
-    files += ("parameters.py", "rotation_chart.py")  # which angles are anchored
-    files += ("elastic.py", "masses.py")  # what the gravity terms' functions call
-    files += ("code_key.py",)  # how a user term's code is keyed
-    text = "".join((here / f).read_text() for f in files)
+    # every module of the model: the graph's code, the parameters' layout (p), the terms'
+    # helpers (lumped bases, gravity moments) and how a user term's code is keyed; an edit
+    # to any of them compiles again rather than risk an old kernel
+    files = sorted(Path(__file__).parent.glob("*.py"))
+    text = "".join(f.read_text() for f in files)
     text += ca.__version__ + " ".join(CFLAGS)
     return hashlib.sha256(text.encode()).hexdigest()
 

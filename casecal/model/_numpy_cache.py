@@ -10,9 +10,9 @@ so a later process loads it in milliseconds without building any CasADi graph.
 One file per evaluator, ``casecal_<digest>.numpy``: a line of JSON (the digest of its key,
 Python's bytecode magic number, the payload's size, the evaluator's output size and
 instruction count, and a SHA-256 over all of them and the payload), then the
-zlib-compressed `marshal` of the code. The digest hashes the
-key (structure, output, columns), everything the C kernels' digest covers
-(`casecal.model._native.fingerprint`) and the translator's own source. A file that fails any
+zlib-compressed `marshal` of the code. The digest hashes the key (structure, output,
+columns) and everything the C kernels' digest covers (`casecal.model._native.fingerprint`:
+the model's source, the translator's among it). A file that fails any
 check (truncated, flipped bytes in the code or the header, another evaluator's, another
 Python's) is removed and rebuilt with one warning; marshal never reads unverified bytes.
 Something that is not a regular file in its place is left alone, said once. A cache that
@@ -42,9 +42,8 @@ SUFFIX = ".numpy"
 
 def _source_fingerprint() -> str:
     """What a cached code object depends on besides its key."""
-    here = Path(__file__).parent
+    # the model's modules (the translator and this file among them) and Python's bytecode
     text = _native.fingerprint() + importlib.util.MAGIC_NUMBER.hex()
-    text += "".join((here / f).read_text() for f in ("_vectorised.py", "_numpy_cache.py"))
     return hashlib.sha256(text.encode()).hexdigest()
 
 

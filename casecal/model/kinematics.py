@@ -174,6 +174,12 @@ class Structure:
         return len(self.joint_types) + len(self.inputs) + len(self.sessions)
 
     @property
+    def keyed(self) -> bool:
+        """Whether the key of every error term's code covers all it reads, so that the
+        kernels may be cached on disk (`casecal.model.code_key`)."""
+        return all(t.keyed for t in self.terms)
+
+    @property
     def kernel_key(self) -> Structure:
         """What names this structure's compiled kernels: itself, with the sessions' labels
         numbered (labels name parameters; the graph does not depend on them)."""

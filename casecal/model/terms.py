@@ -14,9 +14,9 @@ ones. The built-in terms use the same mechanism:
 
 A user term: ``ErrorTerm(kind, joint, parameters, build)`` with
 ``build(ctx: TermContext, term: ErrorTerm) -> SX`` (rad, for a revolute joint), attached
-with `Robot.with_terms`. Compiled kernels are cached under a key of the function's code,
-the data it reads and the helpers of the user's own it calls (`casecal.model.code_key`);
-after a change that key cannot see (a method of a class it calls), give `kind` a new value.
+with `Robot.with_terms`. Compiled kernels are cached on disk under a key of what the
+function computes with (`casecal.model.code_key`); a function that reads something the key
+cannot cover is evaluated by numpy and never cached on disk (`ErrorTerm.keyed`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import CalibrationError
-from .code_key import fingerprint
+from .code_key import code_key, fingerprint  # noqa: F401  (fingerprint: public)
 from .parameters import declare_unit
 
 STANDARD_GRAVITY = 9.80665  # m/s²
@@ -130,7 +130,7 @@ class ErrorTerm:
             raise CalibrationError(f"error term {self.kind!r}: build must be a function")
         # the function's own code keys the compiled kernels: an edited function never
         # reuses a kernel built from its earlier version
-        object.__setattr__(self, "code", fingerprint(self.build))
+        object.__setattr__(self, "code", _code(self.build))
         if self.units:
             if len(self.units) != len(self.parameters):
                 raise CalibrationError(f"error term {self.kind!r}: give one unit per parameter")
@@ -148,9 +148,28 @@ class ErrorTerm:
             raise CalibrationError(f"error term {self.kind!r}: target must be 'angle' or 'link'")
 
     @property
+    def keyed(self) -> bool:
+        """Whether `code` covers all the function reads, so that its kernels may be cached
+        on disk (`casecal.model.code_key`)."""
+        return not self.code.startswith(UNKEYED)
+
+    @property
     def shape(self) -> tuple:
         """What the symbolic graph depends on: everything but the values."""
         return (self.kind, self.joint, self.parameters, self.data, self.target, self.code)
+
+
+UNKEYED = "unkeyed"
+
+
+def _code(build) -> str:
+    """The key of `build` for the kernels' cache; where it misses something the function
+    reads, marked `UNKEYED` with this process's identity of `build`, so that two such
+    functions never share a graph and none is cached on disk."""
+    key = code_key(build)
+    if not key.unseen:
+        return key.digest
+    return f"{UNKEYED} {key.digest} {id(build):x}: reads {key.unseen[0]}"
 
 
 def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=(), carried=()) -> tuple:
