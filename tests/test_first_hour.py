@@ -342,8 +342,8 @@ def test_report_help_names_every_study_and_states_the_readme_timings(capsys):
     for words in NAMES.values():
         assert words in text, words
     readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
-    full = re.search(r"about ([\d.]+) minutes? for \w+ studies", readme)
+    full = re.search(r"about ([\d.]+) (minutes?|s) for \w+ studies", readme)
     quick = re.search(r"--quick` about (\d+) s", readme)
     assert full and quick
-    assert f"About {full[1]} minutes on 2 idle cores" in text
+    assert f"About {full[1]} {full[2]} on 2 idle cores" in text
     assert f"--quick: about {quick[1]} s" in text

@@ -19,8 +19,8 @@ def add_parser(sub) -> None:
         "calibrate until a target; relative measurements; compliance under gravity; an "
         "elastic humanoid tree) and write "
         "casecal-report.pdf with every figure as PNG and every table as CSV into the "
-        "output folder. About 4.5 minutes on 2 idle cores (--quick: about 105 s); the first "
-        "run on a machine also compiles its kernels, minutes more.",
+        "output folder. About 80 s on 2 idle cores (--quick: about 25 s); the first run "
+        "on a machine also compiles its kernels, about 45 s more.",
     )
     p.add_argument(
         "-o",
