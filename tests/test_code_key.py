@@ -426,16 +426,47 @@ KEYS = textwrap.dedent(
 )
 
 
-def test_objects_sets_and_methods_key_the_same_in_every_process():
-    """No memory address and no hash order in a key, or every process compiles again."""
-    runs = [
+def _under_seeds(script: str, seeds) -> list[str]:
+    """What `script` prints in a new process per hash seed."""
+    return [
         subprocess.run(
-            [sys.executable, "-c", KEYS],
+            [sys.executable, "-c", script],
             capture_output=True,
             text=True,
             check=True,
             env={**os.environ, "PYTHONHASHSEED": seed},
         ).stdout
-        for seed in ("1", "2", "3")
+        for seed in seeds
     ]
+
+
+def test_objects_sets_and_methods_key_the_same_in_every_process():
+    """No memory address and no hash order in a key, or every process compiles again."""
+    runs = _under_seeds(KEYS, ("1", "2", "3"))
     assert "unseen=()" in runs[0] and runs[0] == runs[1] == runs[2]
+
+
+_FINGERPRINTS = """
+import functools
+from casecal.model import terms
+
+def user(ctx, term, scale=2.0):
+    weights = [scale * i for i in range(3)]  # a comprehension: nested code
+    k = ctx.p("k") if "k" in {"k", "j"} else 0  # a set literal: a frozenset constant
+    return sum(w * ctx.q[i] for i, w in enumerate(weights)) * k
+
+own = {n: f for n, f in vars(terms).items() if n.startswith("_") and hasattr(f, "__code__")}
+both = {name: terms.fingerprint(f) for name, f in own.items()}
+both["user"] = terms.fingerprint(user)
+both["partial"] = terms.fingerprint(functools.partial(user, scale=3.0))
+print(sorted(both.items()))
+"""
+
+
+def test_a_term_keys_its_kernels_the_same_in_every_process():
+    """The kernels of a term are compiled once per machine: the key of its function
+    must not hold a memory address (a comprehension's code, a function in its closure)
+    or a set's hash order, or every process (each study worker) compiles them again."""
+    runs = _under_seeds(_FINGERPRINTS, ("1", "2"))
+    assert "'_lumped'" in runs[0] and "'user'" in runs[0]
+    assert runs[0] == runs[1]

@@ -319,45 +319,6 @@ def test_an_edited_term_never_reuses_the_old_kernel():
     assert np.abs(a.position(q) - b.position(q)).max() > 1e-3
 
 
-_FINGERPRINTS = """
-import functools
-from casecal.model import terms
-
-def user(ctx, term, scale=2.0):
-    weights = [scale * i for i in range(3)]  # a comprehension: nested code
-    k = ctx.p("k") if "k" in {"k", "j"} else 0  # a set literal: a frozenset constant
-    return sum(w * ctx.q[i] for i, w in enumerate(weights)) * k
-
-own = {n: f for n, f in vars(terms).items() if n.startswith("_") and hasattr(f, "__code__")}
-both = {name: terms.fingerprint(f) for name, f in own.items()}
-both["user"] = terms.fingerprint(user)
-both["partial"] = terms.fingerprint(functools.partial(user, scale=3.0))
-print(sorted(both.items()))
-"""
-
-
-def test_a_term_keys_its_kernels_the_same_in_every_process():
-    """The kernels of a term are compiled once per machine: the key of its function
-    must not hold a memory address (a comprehension's code, a function in its closure)
-    or a set's hash order, or every process (each study worker) compiles them again."""
-    import os
-    import subprocess
-    import sys
-
-    runs = [
-        subprocess.run(
-            [sys.executable, "-c", _FINGERPRINTS],
-            capture_output=True,
-            text=True,
-            check=True,
-            env={**os.environ, "PYTHONHASHSEED": seed},
-        ).stdout
-        for seed in ("1", "2")
-    ]
-    assert "'_lumped'" in runs[0] and "'user'" in runs[0]
-    assert runs[0] == runs[1]
-
-
 TABLE = np.zeros(3000)  # a module-level table a term reads
 
 
