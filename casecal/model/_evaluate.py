@@ -180,24 +180,12 @@ class Evaluator:
         return out
 
     def _key(self) -> tuple:
-        return (self.chain.structure.kernel_key, self.kind, self.columns)
-
-    def _on_disk(self) -> bool:
-        """Whether this evaluator's kernel and numpy code may be cached on disk: not when
-        an error term's key misses something its function reads (it could be served an
-        edited function's old numbers). Then numpy evaluates, translated in this process."""
+        """What names this evaluator's kernel and numpy code on disk."""
         structure = self.chain.structure
-        if structure.keyed:
-            return True
-        term = next(t for t in structure.terms if not t.keyed)
-        _native._say_once(
-            f"error term {term.kind!r} {term.code.split(': ', 1)[1]}, which its cache key "
-            "cannot cover: its kernels are not cached on disk and numpy evaluates them "
-            "(give that value a repr without a memory address, or build it from numbers)",
-            log.warning,
-            f"unkeyed {term.kind}",
-        )
-        return False
+        key = (structure.kernel_key, self.kind, self.columns)
+        if structure.by_graph:  # a user's term: what it builds, as compiled
+            key += (self.chain.graph_digest,)
+        return key
 
     def _compile_now(self, n: int, at_once: bool = False) -> bool:
         """Backend "auto", no kernel tried yet: whether to load or build it for this batch.
@@ -207,7 +195,7 @@ class Evaluator:
         this chain's kind reach the kernel's compile time (module doc).
         """
         if n >= COMPILE_LARGE_BATCH or _native.is_cached(self._key()):
-            return True  # (_use_native has ruled out a structure not cached on disk)
+            return True
         instructions = self._instructions()
         if instructions > COMPILE_MAX_INSTRUCTIONS:
             return False  # numpy for now; a large batch may still compile it
@@ -229,9 +217,7 @@ class Evaluator:
         if not self._vectorised_tried and not self._cache_looked:
             with BUILDING:
                 if not self._vectorised_tried and not self._cache_looked:
-                    found = None
-                    if self.chain.structure.keyed:
-                        found = _numpy_cache.load(self._key(), int(np.prod(self.shape)))
+                    found = _numpy_cache.load(self._key(), int(np.prod(self.shape)))
                     if found is not None:
                         try:
                             self._vectorised_fn = _vectorised.Vectorised.from_code(*found)
@@ -255,10 +241,9 @@ class Evaluator:
                     except _vectorised.Unsupported as exc:
                         log.info("numpy evaluation unavailable (%s); using CasADi's", exc)
                     else:
-                        if self._on_disk():
-                            _numpy_cache.store(
-                                self._key(), built.code, built.n_out, built.n_instructions
-                            )
+                        _numpy_cache.store(
+                            self._key(), built.code, built.n_out, built.n_instructions
+                        )
                         self._vectorised_fn = built
                     self._vectorised_tried = True
         return self._vectorised_fn
@@ -266,8 +251,6 @@ class Evaluator:
     def _use_native(self, n: int, n_p: int, at_once: bool = False) -> bool:
         backend = backend_choice()
         if backend in ("casadi", "numpy") or (backend == "auto" and n < COMPILE_MIN_POSES):
-            return False
-        if not self._on_disk():
             return False
         if not self._native_tried and backend == "auto" and not self._compile_now(n, at_once):
             return False  # numpy for now, its seconds counted towards the compile

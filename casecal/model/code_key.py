@@ -1,9 +1,8 @@
-"""A key for a user function's code, stable across processes and changed by any edit.
+"""A key for a function's code and data, stable across processes and changed by an edit.
 
-Compiled kernels and the numpy evaluator's code are cached on disk under a key that holds
-each error term's key: a function whose key stayed the same after its behaviour changed
-would be served the old numbers. So the key covers what the function computes with, as
-the process holds it (a file edited after its import is not what runs):
+An error term's key (`casecal.model.terms`) names its graph in a process, and casecal's own
+terms' kernels on disk. So it covers what the function computes with, as the process holds
+it (a file edited after its import is not what runs):
 
 - its code, and the code nested in it (argument names and flags included), its defaults
   and its closure values;
@@ -17,9 +16,10 @@ the process holds it (a file edited after its import is not what runs):
   casecal's own model by its source (`casecal.model._native.fingerprint`).
 
 What the walk cannot key (an object that shows only its memory address, data nested past
-Python's recursion limit, helpers nested deeper than `_DEPTH`) is named in
-`CodeKey.unseen`: such a term's kernels are never cached on disk (`casecal.model.terms`),
-which costs time and never numbers.
+Python's recursion limit, helpers nested deeper than `_DEPTH`, an object that raises when
+read) is named in `CodeKey.unseen`. A Python function's behaviour cannot be keyed
+completely from outside (a value read from a file, a method patched at run time): a
+user's term is therefore keyed on disk by the graph it builds, never by this key alone.
 """
 
 from __future__ import annotations
@@ -84,9 +84,13 @@ def code_key(function) -> CodeKey:
     try:
         text = walk.function(function, 0)
     except RecursionError:
-        name = getattr(function, "__qualname__", type(function).__name__)
-        return CodeKey(hashlib.sha256(name.encode()).hexdigest()[:16], ("data nested too deep",))
-    return CodeKey(text, tuple(dict.fromkeys(walk.unseen)))
+        problem = "data nested too deep"
+    except Exception as exc:  # the user's objects: whatever their attributes raise
+        problem = f"an object that raises when read ({type(exc).__name__})"
+    else:
+        return CodeKey(text, tuple(dict.fromkeys(walk.unseen)))
+    name = str(getattr(function, "__qualname__", type(function).__name__))
+    return CodeKey(hashlib.sha256(name.encode()).hexdigest()[:16], (problem,))
 
 
 def fingerprint(function) -> str:
@@ -188,8 +192,9 @@ class _Walk:
             return ("array", v.dtype.str, v.shape, digest)
         if isinstance(v, ca.DM):
             return ("DM", self.value(np.array(v), depth))
-        if isinstance(v, (ca.SX, ca.MX)):
-            return (type(v).__name__, v.shape, str(v))
+        if isinstance(v, (ca.SX, ca.MX)):  # str() of a deep expression overflows the stack
+            graph = ca.Function("v", ca.symvar(v), [v]).serialize()
+            return (type(v).__name__, v.shape, hashlib.sha256(graph.encode()).hexdigest())
         if isinstance(v, types.CodeType):
             counts = (v.co_argcount, v.co_posonlyargcount, v.co_kwonlyargcount, v.co_flags)
             names = (v.co_names, v.co_varnames, v.co_freevars, v.co_cellvars)

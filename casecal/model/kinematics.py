@@ -62,10 +62,11 @@ and 3 parallel) it is ``beta2``.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 from typing import NamedTuple
 
 import casadi as ca
@@ -174,19 +175,23 @@ class Structure:
         return len(self.joint_types) + len(self.inputs) + len(self.sessions)
 
     @property
-    def keyed(self) -> bool:
-        """Whether the key of every error term's code covers all it reads, so that the
-        kernels may be cached on disk (`casecal.model.code_key`)."""
-        return all(t.keyed for t in self.terms)
+    def by_graph(self) -> bool:
+        """Whether an error term is keyed by the graph it builds, not by its code (a user's
+        term, `casecal.model.terms.ErrorTerm.by_graph`): its kernels' key on disk then
+        holds the graph's digest (`Chain.graph_digest`)."""
+        return any(t.by_graph for t in self.terms)
 
     @property
     def kernel_key(self) -> Structure:
         """What names this structure's compiled kernels: itself, with the sessions' labels
-        numbered (labels name parameters; the graph does not depend on them)."""
-        if not self.sessions:
-            return self
-        numbered = tuple(str(k) for k in range(2, len(self.sessions) + 2))
-        return dataclasses.replace(self, sessions=numbered)
+        numbered (labels name parameters; the graph does not depend on them) and the
+        terms keyed by their graph without this process's identity of their function."""
+        changes = {}
+        if self.sessions:
+            changes["sessions"] = tuple(str(k) for k in range(2, len(self.sessions) + 2))
+        if self.by_graph:
+            changes["terms"] = tuple(t.on_disk() for t in self.terms)
+        return dataclasses.replace(self, **changes) if changes else self
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -390,6 +395,15 @@ class Chain:
                 if self._graph is None:
                     self._graph = self._build()
         return self._graph
+
+    @cached_property
+    def graph_digest(self) -> str:
+        """SHA-256 of the serialized graph of ``T(q, p)``, from which every evaluator of the
+        chain is derived: the disk key of kernels whose error terms are keyed by what they
+        build rather than by their Python code (`Structure.by_graph`)."""
+        g = self.graph
+        text = ca.Function("T", [g.qin, g.pext], [g.T]).serialize()
+        return hashlib.sha256(text.encode()).hexdigest()
 
     def _build(self):
         structure, m = self.structure, len(self.angle_index)

@@ -14,14 +14,16 @@ ones. The built-in terms use the same mechanism:
 
 A user term: ``ErrorTerm(kind, joint, parameters, build)`` with
 ``build(ctx: TermContext, term: ErrorTerm) -> SX`` (rad, for a revolute joint), attached
-with `Robot.with_terms`. Compiled kernels are cached on disk under a key of what the
-function computes with (`casecal.model.code_key`); a function that reads something the key
-cannot cover is evaluated by numpy and never cached on disk (`ErrorTerm.keyed`).
+with `Robot.with_terms`. Its compiled kernels are cached on disk under a key of the CasADi
+graph it builds (`ErrorTerm.by_graph`): an edit anywhere in what the function reads that
+changes the numbers changes the graph, and so the key.
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -148,10 +150,19 @@ class ErrorTerm:
             raise CalibrationError(f"error term {self.kind!r}: target must be 'angle' or 'link'")
 
     @property
-    def keyed(self) -> bool:
-        """Whether `code` covers all the function reads, so that its kernels may be cached
-        on disk (`casecal.model.code_key`)."""
-        return not self.code.startswith(UNKEYED)
+    def by_graph(self) -> bool:
+        """Whether the term's kernels are keyed on disk by the CasADi graph it builds (a
+        function not casecal's own), not by `code` (`_code`)."""
+        return self.code.startswith(BY_GRAPH)
+
+    def on_disk(self) -> ErrorTerm:
+        """This term as it names kernels on disk: without this process's identity of its
+        function, which a term keyed by its graph holds in `code`."""
+        if not self.by_graph:
+            return self
+        term = copy.copy(self)
+        object.__setattr__(term, "code", BY_GRAPH)
+        return term
 
     @property
     def shape(self) -> tuple:
@@ -159,17 +170,28 @@ class ErrorTerm:
         return (self.kind, self.joint, self.parameters, self.data, self.target, self.code)
 
 
-UNKEYED = "unkeyed"
+BY_GRAPH = "graph"
 
 
 def _code(build) -> str:
-    """The key of `build` for the kernels' cache; where it misses something the function
-    reads, marked `UNKEYED` with this process's identity of `build`, so that two such
-    functions never share a graph and none is cached on disk."""
+    """The key of `build` in `Structure`, which keys the chain's graph in this process and
+    its kernels on disk.
+
+    casecal's own terms: the key of their code and data (`casecal.model.code_key`; the
+    model's source is keyed with the kernels). Any other function, or one whose key misses
+    something it reads: `BY_GRAPH`, that key and this process's identity of `build`, so that
+    two such functions never share a graph in a process; on disk their kernels are keyed
+    by the graph they build (`Chain.graph_digest`), which is what is compiled, so that no
+    edit to a user's code, however indirect, is served old numbers.
+    """
     key = code_key(build)
-    if not key.unseen:
+    inner = build
+    while isinstance(inner, functools.partial):
+        inner = inner.func
+    own = str(getattr(inner, "__module__", None)).startswith("casecal.model.")
+    if own and not key.unseen:
         return key.digest
-    return f"{UNKEYED} {key.digest} {id(build):x}: reads {key.unseen[0]}"
+    return f"{BY_GRAPH} {key.digest} {id(build):x}"
 
 
 def joint_deltas(terms, walk, q, p, gravity, inputs=None, tool=None, known=(), carried=()) -> tuple:
