@@ -71,7 +71,7 @@ def load(key, n_out: int) -> tuple[types.CodeType, int, int] | None:
                 f"{path} is not a regular file; numpy evaluators are translated again in "
                 "each process until it is removed",
                 log.warning,
-                "numpy cache",
+                "numpy cache entry",  # not silenced by a failed store's "numpy cache" line
             )
             return None  # a folder or a FIFO is not ours to touch (reading one would wait)
         if not path.is_file():
